@@ -1,0 +1,32 @@
+#!/usr/bin/env bash
+# One entry point for the README's commands:
+#   bash tasks.sh demo    set up (first time) and run the main job
+#   bash tasks.sh test    set up (first time) and run the test suite
+#   bash tasks.sh bench   set up with the benchmark extras and run the benchmarks
+# Set-up creates ./.venv with the package installed in editable mode; it is
+# re-run whenever pyproject.toml is newer than the environment's stamp.
+set -euo pipefail
+cd "$(dirname "$0")"
+PY=${PYTHON:-python3}
+VENV=.venv
+
+setup() {
+    local extras=$1 stamp="$VENV/.stamp-$1"
+    if [ ! -x "$VENV/bin/python" ]; then
+        "$PY" -m venv "$VENV"
+    fi
+    if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
+        "$VENV/bin/python" -m pip install --quiet --upgrade pip
+        "$VENV/bin/python" -m pip install --quiet -e ".[$extras]"
+        touch "$stamp"
+    fi
+}
+
+cmd=${1:-}
+shift || true
+case "$cmd" in
+    demo) setup test; exec "$VENV/bin/python" -m lagjax.demo "$@" ;;
+    test) setup test; exec "$VENV/bin/python" -m pytest "$@" ;;
+    bench) setup "test,bench"; exec "$VENV/bin/python" benchmarks/derivation_overhead.py "$@" ;;
+    *) echo "usage: bash tasks.sh {demo|test|bench} [args...]" >&2; exit 2 ;;
+esac

@@ -1,0 +1,17 @@
+"""Comparison helpers shared by the tests."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+
+def tree_allclose(x, y, *, rtol=1e-10, atol=1e-10) -> bool:
+    """True when two pytrees have the same structure and all leaves are close."""
+    x_leaves, x_def = jax.tree_util.tree_flatten(x)
+    y_leaves, y_def = jax.tree_util.tree_flatten(y)
+    if x_def != y_def:
+        return False
+    return all(
+        jnp.shape(a) == jnp.shape(b) and np.allclose(a, b, rtol=rtol, atol=atol)
+        for a, b in zip(x_leaves, y_leaves)
+    )
