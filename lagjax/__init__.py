@@ -1,3 +1,21 @@
-"""lagjax: classical mechanics in JAX."""
+"""lagjax: classical mechanics in JAX.
+
+Write a Lagrangian L(q, q̇) or a Hamiltonian H(q, p) as a plain JAX function; lagjax
+derives the equations of motion, Legendre transforms, Poisson brackets and normal
+modes by automatic differentiation.
+"""
+
+from .mechanics.canonical import symplectic_defect as symplectic_defect
+from .mechanics.euler_lagrange import (
+    euler_lagrange_acceleration as euler_lagrange_acceleration,
+)
+from .mechanics.hamiltonian import AbstractHamiltonian as AbstractHamiltonian
+from .mechanics.hamiltonian import Hamiltonian as Hamiltonian
+from .mechanics.hamiltonian import LegendreHamiltonian as LegendreHamiltonian
+from .mechanics.hamiltonian import SeparableHamiltonian as SeparableHamiltonian
+from .mechanics.lagrangian import Lagrangian as Lagrangian
+from .mechanics.modes import equilibrium as equilibrium
+from .mechanics.modes import normal_modes as normal_modes
+from .mechanics.modes import stiffness_matrices as stiffness_matrices
 
 __version__ = "0.1.0"

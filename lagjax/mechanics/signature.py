@@ -16,7 +16,10 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-_POSITIONAL = (inspect.Parameter.POSITIONAL_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)
+_POSITIONAL = (
+    inspect.Parameter.POSITIONAL_ONLY,
+    inspect.Parameter.POSITIONAL_OR_KEYWORD,
+)
 
 
 def positional_arity(fn: Callable, *, minimum: int, maximum: int, what: str) -> int:

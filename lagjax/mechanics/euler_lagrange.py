@@ -1,0 +1,174 @@
+r"""The Euler–Lagrange equations solved for the generalized accelerations.
+
+For $L(q, \dot q, t)$ with generalized non-conservative force $Q$ (including the
+Rayleigh term $-\partial D/\partial \dot q$), $\frac{d}{dt}\partial L/\partial\dot q
+- \partial L/\partial q = Q$ expands by the chain rule into the linear system
+
+$$ M\,\ddot q = \frac{\partial L}{\partial q}
+      - \frac{\partial^2 L}{\partial \dot q\,\partial q}\,\dot q
+      - \frac{\partial^2 L}{\partial \dot q\,\partial t} + Q,
+   \qquad M = \frac{\partial^2 L}{\partial \dot q\,\partial \dot q}. $$
+
+All derivatives come from autodiff. Two formulations of the same equations:
+
+- **scalar** (few coordinates): every coordinate is its own scalar and every
+  derivative a forward-mode pass with a scalar tangent. XLA then sees only scalar
+  arithmetic, common subexpressions of the nested passes merge, and on CPU the whole
+  step fuses — the speed of hand-written equations of motion.
+- **dense** (many coordinates): gradients, one Jacobian-of-gradient for M and one
+  Jacobian–vector product for the mixed terms, on flat arrays.
+
+Terms that vanish (∂/∂t of an autonomous L) are symbolic zeros in JAX's forward
+mode and constant-folded by XLA, so they cost nothing.
+
+References: the course text §3 (Lagrange's equations, eq. 3.35 with generalized
+forces), Goldstein, *Classical Mechanics* §1.4–1.5.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+from jax.flatten_util import ravel_pytree
+
+from .linalg import UNROLLED_SOLVE_LIMIT, raise_if_singular, solve_dense, solve_unrolled
+from .scalarize import as_object_array, objects_from_scalars, scalarize
+
+# Up to this many coordinates the scalar formulation is used; its trace grows as n²
+# while the dense one stays compact. Chosen by benchmarks/derivation_overhead.py.
+SCALAR_COORDINATE_LIMIT = 6
+
+FlatLagrangian = Callable[[jax.Array, jax.Array, jax.Array], jax.Array]
+
+
+def partial_derivative(fn: Callable[..., jax.Array], index: int) -> Callable:
+    """∂fn/∂z_index for fn(*z) with scalar z, by one forward-mode pass."""
+
+    def derivative(*z):
+        def along(x):
+            return fn(*z[:index], x, *z[index + 1 :])
+
+        return jax.jvp(along, (z[index],), (jnp.ones_like(z[index]),))[1]
+
+    return derivative
+
+
+def _lagrangian_of_scalars(lag_flat: FlatLagrangian, q, v, t) -> Callable:
+    """L as a function of 2n + 1 scalars (q_1..q_n, q̇_1..q̇_n, t).
+
+    Prefers the scalarized twin of L (pure scalar arithmetic, see `scalarize`); falls
+    back to stacking the scalars into the arrays L was written for.
+    """
+    n = q.shape[0]
+    twin = scalarize(lag_flat, q, v, t)
+    if twin is None:
+        return lambda *z: lag_flat(jnp.stack(z[:n]), jnp.stack(z[n : 2 * n]), z[2 * n])
+    return lambda *z: twin(
+        objects_from_scalars(z[:n]),
+        objects_from_scalars(z[n : 2 * n]),
+        as_object_array(z[2 * n]),
+    )
+
+
+def _scalar_system(lag_flat: FlatLagrangian, q, v, t):
+    """Mass matrix (upper triangle, nested lists) and right-hand side, scalar form."""
+    n = q.shape[0]
+    lagrangian_of_scalars = _lagrangian_of_scalars(lag_flat, q, v, t)
+    z = (*(q[i] for i in range(n)), *(v[i] for i in range(n)), t)
+    momenta = [partial_derivative(lagrangian_of_scalars, n + i) for i in range(n)]
+    mass = [
+        [
+            partial_derivative(momenta[i], n + j)(*z) if j >= i else None
+            for j in range(n)
+        ]
+        for i in range(n)
+    ]
+    rhs = []
+    for i in range(n):
+        force = partial_derivative(lagrangian_of_scalars, i)(*z)
+
+        def momentum_along_q_and_t(*qt, i=i):
+            return momenta[i](*qt[:n], *z[n : 2 * n], qt[n])
+
+        # (∂p_i/∂q)·q̇ + ∂p_i/∂t in one pass: the part of dp_i/dt not due to q̈.
+        transport = jax.jvp(
+            momentum_along_q_and_t, (*z[:n], t), (*z[n : 2 * n], jnp.ones_like(t))
+        )[1]
+        rhs.append(force - transport)
+    return mass, rhs
+
+
+def _dense_system(lag_flat: FlatLagrangian, q, v, t):
+    """Mass matrix and right-hand side as arrays."""
+    momentum = jax.grad(lag_flat, argnums=1)
+    mass = jax.jacfwd(momentum, argnums=1)(q, v, t)
+    force = jax.grad(lag_flat, argnums=0)(q, v, t)
+    transport = jax.jvp(
+        lambda qq, tt: momentum(qq, v, tt), (q, t), (v, jnp.ones_like(t))
+    )[1]
+    return mass, force - transport
+
+
+def _solve(mass, rhs, scalar: bool):
+    n = len(rhs)
+    if scalar and n <= UNROLLED_SOLVE_LIMIT:
+        x, singular = solve_unrolled(mass, rhs)
+        return jnp.stack(x), singular
+    if scalar:
+        full = [[mass[min(i, j)][max(i, j)] for j in range(n)] for i in range(n)]
+        mass = jnp.stack([jnp.stack(row) for row in full])
+        rhs = jnp.stack(rhs)
+    return solve_dense(mass, rhs)
+
+
+def euler_lagrange_acceleration(
+    lagrangian: Callable[[Any, Any, Any, Any], jax.Array],
+    q: Any,
+    qdot: Any,
+    t: Any,
+    args: Any,
+    generalized_force: Any = None,
+    *,
+    check: bool = True,
+) -> Any:
+    """q̈ from the Euler–Lagrange equations.
+
+    **Arguments:**
+    - `lagrangian`: `L(q, qdot, t, args) -> scalar`.
+    - `q`, `qdot`: matching pytrees of coordinates and velocities.
+    - `generalized_force`: `None`, or a pytree like `q` of the non-conservative
+      generalized force Q (already including −∂D/∂q̇).
+
+    - `check`: with True, a singular mass matrix raises a run-time error
+      (`eqx.error_if`, works inside jit). With False the result is NaN instead:
+      the check is a branch that splits an otherwise fused integration step into
+      several kernels (≈3× slower on CPU, see the benchmark), so integration loops
+      use False and check the final state once.
+
+    **Returns:** q̈ with the structure of `q`.
+    """
+    q_flat, unravel = ravel_pytree(q)
+    v_flat, _ = ravel_pytree(qdot)
+    t = jnp.asarray(t, dtype=q_flat.dtype)
+
+    def lag_flat(qf, vf, tt):
+        return lagrangian(unravel(qf), unravel(vf), tt, args)
+
+    n = q_flat.shape[0]
+    scalar = n <= SCALAR_COORDINATE_LIMIT
+    if scalar:
+        mass, rhs = _scalar_system(lag_flat, q_flat, v_flat, t)
+    else:
+        mass, rhs = _dense_system(lag_flat, q_flat, v_flat, t)
+    if generalized_force is not None:
+        force_flat, _ = ravel_pytree(generalized_force)
+        rhs = [rhs[i] + force_flat[i] for i in range(n)] if scalar else rhs + force_flat
+    qddot, singular = _solve(mass, rhs, scalar)
+    if check:
+        qddot = raise_if_singular(qddot, singular, "The mass matrix ∂²L/∂q̇∂q̇")
+    else:
+        qddot = jnp.where(singular, jnp.nan, qddot)
+    return unravel(qddot)

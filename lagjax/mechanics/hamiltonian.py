@@ -1,0 +1,193 @@
+r"""Hamiltonian systems: $H(q, p, t)$ and Hamilton's equations.
+
+$$ \dot q = \frac{\partial H}{\partial p}, \qquad
+   \dot p = -\frac{\partial H}{\partial q}. $$
+
+Three final forms share one abstract base:
+
+- `Hamiltonian(H)`: a general user function `H(q, p[, t[, args]])`.
+- `SeparableHamiltonian(T, V)`: $H = T(p) + V(q)$. Its vector field never forms
+  cross derivatives, and it enables the explicit splitting solvers.
+- `LegendreHamiltonian(lagrangian)`: what `Lagrangian.to_hamiltonian()` returns. Its
+  vector field is evaluated as $\dot q = \dot q(q, p)$ (solved from $p = \partial
+  L/\partial \dot q$) and $\dot p = \partial L/\partial q + Q$, with no derivative
+  taken through the solve.
+
+References: the course text §6.2 (Hamilton's equations, eq. 6.11–6.13), Goldstein,
+*Classical Mechanics* §8.1–8.2.
+"""
+
+from __future__ import annotations
+
+import abc
+from collections.abc import Callable
+from typing import Any
+
+import equinox as eqx
+import jax
+
+from .lagrangian import Lagrangian
+from .legendre import invert_gradient, tree_dot
+from .signature import (
+    call_with_arity,
+    check_same_structure,
+    check_scalar,
+    positional_arity,
+)
+
+
+class AbstractHamiltonian(eqx.Module):
+    """A Hamiltonian system. Call it as `H(q, p, t=0.0, args=None)` for the value."""
+
+    quadratic_in_momentum: eqx.AbstractVar[bool]
+
+    @abc.abstractmethod
+    def __call__(self, q: Any, p: Any, t: Any = 0.0, args: Any = None) -> jax.Array:
+        """The value of H."""
+
+    def velocity(self, q: Any, p: Any, t: Any = 0.0, args: Any = None) -> Any:
+        """q̇ = ∂H/∂p."""
+        return jax.grad(self, argnums=1)(q, p, t, args)
+
+    def vector_field(
+        self, q: Any, p: Any, t: Any = 0.0, args: Any = None
+    ) -> tuple[Any, Any]:
+        """Hamilton's equations: `(dq/dt, dp/dt) = (∂H/∂p, −∂H/∂q)`."""
+        dh_dq, dh_dp = jax.grad(self, argnums=(0, 1))(q, p, t, args)
+        return dh_dp, jax.tree_util.tree_map(lambda x: -x, dh_dq)
+
+    def to_lagrangian(self) -> Lagrangian:
+        """The Legendre-transformed Lagrangian L(q, q̇, t) = p·q̇ − H."""
+        return Lagrangian(
+            HamiltonianLegendreDual(self),
+            quadratic_in_velocity=self.quadratic_in_momentum,
+        )
+
+
+class Hamiltonian(AbstractHamiltonian):
+    """A general Hamiltonian `H(q, p)`, `H(q, p, t)` or `H(q, p, t, args)`.
+
+    `quadratic_in_momentum=True` declares H at most quadratic in p, making the
+    Legendre transform to L a single linear solve.
+    """
+
+    function: Callable = eqx.field(static=True)
+    arity: int = eqx.field(static=True)
+    quadratic_in_momentum: bool = eqx.field(static=True)
+
+    def __init__(self, H: Callable, *, quadratic_in_momentum: bool = False):
+        self.function = H
+        self.arity = positional_arity(H, minimum=2, maximum=4, what="the Hamiltonian H")
+        self.quadratic_in_momentum = quadratic_in_momentum
+
+    def __call__(self, q: Any, p: Any, t: Any = 0.0, args: Any = None) -> jax.Array:
+        check_same_structure(q, p, "q", "p")
+        value = call_with_arity(self.function, self.arity, q, p, t, args)
+        return check_scalar(value, "the Hamiltonian H")
+
+
+class SeparableHamiltonian(AbstractHamiltonian):
+    """H = T(p) + V(q), with `T(p[, t[, args]])` and `V(q[, t[, args]])`.
+
+    `quadratic_in_momentum` defaults to True (T = ½pᵀM⁻¹p is the usual case); set it
+    to False for a non-quadratic kinetic energy such as the relativistic one.
+    """
+
+    kinetic: Callable = eqx.field(static=True)
+    kinetic_arity: int = eqx.field(static=True)
+    potential: Callable = eqx.field(static=True)
+    potential_arity: int = eqx.field(static=True)
+    quadratic_in_momentum: bool = eqx.field(static=True)
+
+    def __init__(self, T: Callable, V: Callable, *, quadratic_in_momentum: bool = True):
+        self.kinetic = T
+        self.kinetic_arity = positional_arity(
+            T, minimum=1, maximum=3, what="the kinetic energy T"
+        )
+        self.potential = V
+        self.potential_arity = positional_arity(
+            V, minimum=1, maximum=3, what="the potential energy V"
+        )
+        self.quadratic_in_momentum = quadratic_in_momentum
+
+    def kinetic_energy(self, p: Any, t: Any = 0.0, args: Any = None) -> jax.Array:
+        value = call_with_arity(self.kinetic, self.kinetic_arity, p, t, args)
+        return check_scalar(value, "the kinetic energy T")
+
+    def potential_energy(self, q: Any, t: Any = 0.0, args: Any = None) -> jax.Array:
+        value = call_with_arity(self.potential, self.potential_arity, q, t, args)
+        return check_scalar(value, "the potential energy V")
+
+    def __call__(self, q: Any, p: Any, t: Any = 0.0, args: Any = None) -> jax.Array:
+        check_same_structure(q, p, "q", "p")
+        return self.kinetic_energy(p, t, args) + self.potential_energy(q, t, args)
+
+    def velocity(self, q: Any, p: Any, t: Any = 0.0, args: Any = None) -> Any:
+        """q̇ = ∂T/∂p."""
+        return jax.grad(self.kinetic_energy)(p, t, args)
+
+    def potential_force(self, q: Any, t: Any = 0.0, args: Any = None) -> Any:
+        """ṗ = −∂V/∂q."""
+        gradient = jax.grad(self.potential_energy)(q, t, args)
+        return jax.tree_util.tree_map(lambda x: -x, gradient)
+
+    def vector_field(
+        self, q: Any, p: Any, t: Any = 0.0, args: Any = None
+    ) -> tuple[Any, Any]:
+        check_same_structure(q, p, "q", "p")
+        return self.velocity(q, p, t, args), self.potential_force(q, t, args)
+
+
+class LegendreHamiltonian(AbstractHamiltonian):
+    """The Hamiltonian of a `Lagrangian`, H(q, p, t) = p·q̇ − L at q̇ = q̇(q, p)."""
+
+    lagrangian: Lagrangian
+    quadratic_in_momentum: bool = eqx.field(static=True)
+
+    def __init__(self, lagrangian: Lagrangian):
+        self.lagrangian = lagrangian
+        self.quadratic_in_momentum = lagrangian.quadratic_in_velocity
+
+    def velocity(self, q: Any, p: Any, t: Any = 0.0, args: Any = None) -> Any:
+        """q̇ solved from p = ∂L/∂q̇(q, q̇, t)."""
+        check_same_structure(q, p, "q", "p")
+        return invert_gradient(
+            lambda qdot: self.lagrangian(q, qdot, t, args),
+            p,
+            quadratic=self.lagrangian.quadratic_in_velocity,
+            what="The mass matrix ∂²L/∂q̇∂q̇",
+        )
+
+    def __call__(self, q: Any, p: Any, t: Any = 0.0, args: Any = None) -> jax.Array:
+        qdot = self.velocity(q, p, t, args)
+        return tree_dot(p, qdot) - self.lagrangian(q, qdot, t, args)
+
+    def vector_field(
+        self, q: Any, p: Any, t: Any = 0.0, args: Any = None
+    ) -> tuple[Any, Any]:
+        """(q̇, ṗ) = (q̇(q, p), ∂L/∂q + Q − ∂D/∂q̇), non-conservative forces included."""
+        qdot = self.velocity(q, p, t, args)
+        pdot = jax.grad(self.lagrangian, argnums=0)(q, qdot, t, args)
+        force = self.lagrangian.generalized_force(q, qdot, t, args)
+        if force is not None:
+            pdot = jax.tree_util.tree_map(lambda a, b: a + b, pdot, force)
+        return qdot, pdot
+
+    def to_lagrangian(self) -> Lagrangian:
+        """The Lagrangian this Hamiltonian was transformed from (exact round trip)."""
+        return self.lagrangian
+
+
+class HamiltonianLegendreDual(eqx.Module):
+    """L(q, q̇, t, args) = p·q̇ − H with p solved from q̇ = ∂H/∂p (a callable)."""
+
+    hamiltonian: AbstractHamiltonian = eqx.field(static=True)
+
+    def __call__(self, q: Any, qdot: Any, t: Any, args: Any) -> jax.Array:
+        p = invert_gradient(
+            lambda p_: self.hamiltonian(q, p_, t, args),
+            qdot,
+            quadratic=self.hamiltonian.quadratic_in_momentum,
+            what="The Hessian ∂²H/∂p∂p",
+        )
+        return tree_dot(p, qdot) - self.hamiltonian(q, p, t, args)

@@ -1,0 +1,166 @@
+r"""`Lagrangian`: a user's $L(q, \dot q, t)$ and everything derived from it.
+
+The user writes L as a plain JAX function of `(q, qdot)`, `(q, qdot, t)` or
+`(q, qdot, t, args)`; `q` may be a scalar, an array or any pytree, with `qdot` of the
+same structure. Non-conservative effects enter through a generalized force
+$Q(q, \dot q, t, \text{args})$ and a Rayleigh dissipation function
+$D(\dot q)$ (or $D(q, \dot q, t, \text{args})$), giving
+
+$$ \frac{d}{dt}\frac{\partial L}{\partial \dot q} - \frac{\partial L}{\partial q}
+   = Q - \frac{\partial D}{\partial \dot q}. $$
+
+References: the course text §3 (Lagrange's equations; eq. 3.35 with generalized
+forces; velocity-dependent potentials), Goldstein, *Classical Mechanics* §1.4–1.6, §2.7.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jax.flatten_util import ravel_pytree
+
+from .euler_lagrange import euler_lagrange_acceleration
+from .legendre import tree_dot
+from .signature import (
+    call_with_arity,
+    check_same_structure,
+    check_scalar,
+    positional_arity,
+)
+
+if TYPE_CHECKING:
+    from .hamiltonian import LegendreHamiltonian
+
+
+class Lagrangian(eqx.Module):
+    r"""A mechanical system given by its Lagrangian $L(q, \dot q, t)$.
+
+    **Arguments:**
+    - `L`: `L(q, qdot)`, `L(q, qdot, t)` or `L(q, qdot, t, args)` returning a scalar.
+    - `force`: optional generalized non-conservative force `Q(q, qdot[, t[, args]])`,
+      a pytree like `q`.
+    - `dissipation`: optional Rayleigh function `D(qdot)` or `D(q, qdot[, t[, args]])`;
+      contributes $-\partial D/\partial\dot q$ to the generalized force.
+    - `quadratic_in_velocity`: declare that L is at most quadratic in q̇
+      ($\tfrac12\dot q^T M(q)\dot q + a(q)\cdot\dot q - V(q)$). The Legendre transform
+      is then one linear solve instead of a Newton iteration.
+
+    `t` defaults to 0.0 and `args` to None in every method.
+    """
+
+    function: Callable = eqx.field(static=True)
+    arity: int = eqx.field(static=True)
+    force: Callable | None = eqx.field(static=True)
+    force_arity: int = eqx.field(static=True)
+    dissipation: Callable | None = eqx.field(static=True)
+    dissipation_arity: int = eqx.field(static=True)
+    quadratic_in_velocity: bool = eqx.field(static=True)
+
+    def __init__(
+        self,
+        L: Callable,
+        *,
+        force: Callable | None = None,
+        dissipation: Callable | None = None,
+        quadratic_in_velocity: bool = False,
+    ):
+        self.function = L
+        self.arity = positional_arity(L, minimum=2, maximum=4, what="the Lagrangian L")
+        self.force = force
+        self.force_arity = (
+            0
+            if force is None
+            else positional_arity(force, minimum=2, maximum=4, what="the force Q")
+        )
+        self.dissipation = dissipation
+        self.dissipation_arity = (
+            0
+            if dissipation is None
+            else positional_arity(
+                dissipation, minimum=1, maximum=4, what="the dissipation function D"
+            )
+        )
+        self.quadratic_in_velocity = quadratic_in_velocity
+
+    def __call__(self, q: Any, qdot: Any, t: Any = 0.0, args: Any = None) -> jax.Array:
+        """The value of L."""
+        check_same_structure(q, qdot, "q", "qdot")
+        value = call_with_arity(self.function, self.arity, q, qdot, t, args)
+        return check_scalar(value, "the Lagrangian L")
+
+    def generalized_force(
+        self, q: Any, qdot: Any, t: Any = 0.0, args: Any = None
+    ) -> Any | None:
+        """Q − ∂D/∂q̇, or None when the system has neither."""
+        total = None
+        if self.force is not None:
+            total = call_with_arity(self.force, self.force_arity, q, qdot, t, args)
+            check_same_structure(q, total, "q", "the force Q")
+        if self.dissipation is not None:
+            friction = jax.grad(self._dissipation_value, argnums=1)(q, qdot, t, args)
+            friction = jax.tree_util.tree_map(jnp.negative, friction)
+            total = (
+                friction
+                if total is None
+                else jax.tree_util.tree_map(jnp.add, total, friction)
+            )
+        return total
+
+    def _dissipation_value(self, q, qdot, t, args):
+        assert self.dissipation is not None
+        if self.dissipation_arity == 1:
+            value = self.dissipation(qdot)
+        else:
+            value = call_with_arity(
+                self.dissipation, self.dissipation_arity, q, qdot, t, args
+            )
+        return check_scalar(value, "the dissipation function D")
+
+    def acceleration(
+        self, q: Any, qdot: Any, t: Any = 0.0, args: Any = None, *, check: bool = True
+    ) -> Any:
+        """q̈ from the Euler–Lagrange equations (see `euler_lagrange_acceleration`).
+
+        A singular mass matrix raises a run-time error; `check=False` returns NaN
+        instead, which is cheaper inside integration loops that check their result.
+        """
+        check_same_structure(q, qdot, "q", "qdot")
+        self(q, qdot, t, args)  # trace-time checks of L's output; no run-time cost
+        return euler_lagrange_acceleration(
+            self._call_unchecked,
+            q,
+            qdot,
+            t,
+            args,
+            self.generalized_force(q, qdot, t, args),
+            check=check,
+        )
+
+    def _call_unchecked(self, q, qdot, t, args):
+        return call_with_arity(self.function, self.arity, q, qdot, t, args)
+
+    def momentum(self, q: Any, qdot: Any, t: Any = 0.0, args: Any = None) -> Any:
+        """Canonical momentum p = ∂L/∂q̇ (structure of `q`)."""
+        return jax.grad(self, argnums=1)(q, qdot, t, args)
+
+    def mass_matrix(
+        self, q: Any, qdot: Any, t: Any = 0.0, args: Any = None
+    ) -> jax.Array:
+        """∂²L/∂q̇∂q̇ as an (n, n) matrix in the raveled (flat) coordinates of q."""
+        check_same_structure(q, qdot, "q", "qdot")
+        v_flat, unravel = ravel_pytree(qdot)
+        return jax.hessian(lambda v: self(q, unravel(v), t, args))(v_flat)
+
+    def energy(self, q: Any, qdot: Any, t: Any = 0.0, args: Any = None) -> jax.Array:
+        """Jacobi's integral h = q̇·∂L/∂q̇ − L (the energy when L = T − V, T quadratic)."""
+        return tree_dot(qdot, self.momentum(q, qdot, t, args)) - self(q, qdot, t, args)
+
+    def to_hamiltonian(self) -> LegendreHamiltonian:
+        """The Legendre-transformed Hamiltonian H(q, p, t) = p·q̇ − L."""
+        from .hamiltonian import LegendreHamiltonian
+
+        return LegendreHamiltonian(self)
