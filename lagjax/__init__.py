@@ -5,7 +5,11 @@ derives the equations of motion, Legendre transforms, Poisson brackets and norma
 modes by automatic differentiation.
 """
 
+from .mechanics.brackets import poisson_bracket as poisson_bracket
+from .mechanics.canonical import GeneratingFunction as GeneratingFunction
+from .mechanics.canonical import is_canonical as is_canonical
 from .mechanics.canonical import symplectic_defect as symplectic_defect
+from .mechanics.canonical import symplectic_form as symplectic_form
 from .mechanics.euler_lagrange import (
     euler_lagrange_acceleration as euler_lagrange_acceleration,
 )

@@ -278,8 +278,11 @@ class GeneratingFunction(eqx.Module):
             return self._mismatch(value, target)
 
         solver = optx.Newton(rtol=self.rtol, atol=self.atol)
-        data = (variable, partner, t, args)
-        unknown = optx.root_find(residual, solver, guess, data).value
+        # As arrays, Python numbers are traced rather than baked into (and
+        # recompiling) optimistix's jitted solve at every new value.
+        data = jax.tree_util.tree_map(jnp.asarray, (variable, partner, t))
+        guess = jax.tree_util.tree_map(jnp.asarray, guess)
+        unknown = optx.root_find(residual, solver, guess, (*data, args)).value
         other_side = _NEW if side == _OLD else _OLD
         return unknown, self._partner(
             other_side, *arguments(unknown, variable), t, args

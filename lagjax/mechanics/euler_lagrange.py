@@ -30,6 +30,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
@@ -124,6 +125,9 @@ def _solve(mass, rhs, scalar: bool):
     return solve_dense(mass, rhs)
 
 
+# Compiled so that eager calls do not dispatch the scalar derivation op by op; under
+# an outer jit this is inlined.
+@eqx.filter_jit
 def euler_lagrange_acceleration(
     lagrangian: Callable[[Any, Any, Any, Any], jax.Array],
     q: Any,

@@ -148,6 +148,7 @@ class LegendreHamiltonian(AbstractHamiltonian):
         self.lagrangian = lagrangian
         self.quadratic_in_momentum = lagrangian.quadratic_in_velocity
 
+    @eqx.filter_jit
     def velocity(self, q: Any, p: Any, t: Any = 0.0, args: Any = None) -> Any:
         """q̇ solved from p = ∂L/∂q̇(q, q̇, t)."""
         check_same_structure(q, p, "q", "p")
@@ -158,10 +159,12 @@ class LegendreHamiltonian(AbstractHamiltonian):
             what="The mass matrix ∂²L/∂q̇∂q̇",
         )
 
+    @eqx.filter_jit
     def __call__(self, q: Any, p: Any, t: Any = 0.0, args: Any = None) -> jax.Array:
         qdot = self.velocity(q, p, t, args)
         return tree_dot(p, qdot) - self.lagrangian(q, qdot, t, args)
 
+    @eqx.filter_jit
     def vector_field(
         self, q: Any, p: Any, t: Any = 0.0, args: Any = None
     ) -> tuple[Any, Any]:
@@ -183,6 +186,7 @@ class HamiltonianLegendreDual(eqx.Module):
 
     hamiltonian: AbstractHamiltonian = eqx.field(static=True)
 
+    @eqx.filter_jit
     def __call__(self, q: Any, qdot: Any, t: Any, args: Any) -> jax.Array:
         p = invert_gradient(
             lambda p_: self.hamiltonian(q, p_, t, args),

@@ -105,6 +105,7 @@ _STRUCTURAL = frozenset(
         "slice",
         "split",
         "squeeze",
+        "stack",
         "transpose",
     ]
 )
@@ -212,6 +213,8 @@ def _structural(eqn: Any, operands: list[np.ndarray]) -> Any:
         return operands[0][index]
     if name == "concatenate":
         return np.concatenate(operands, axis=params["dimension"])
+    if name == "stack":
+        return np.stack(operands, axis=params["axis"])
     if name == "split":
         bounds = np.cumsum(params["sizes"])[:-1]
         return np.split(operands[0], bounds, axis=params["axis"])

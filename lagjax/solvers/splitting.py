@@ -1,0 +1,409 @@
+r"""Explicit symplectic splitting and composition methods for separable Hamiltonians.
+
+For $H(q, p) = T(p) + V(q)$ the flows of the two halves are exact and explicit:
+the *drift* $q \mapsto q + \tau\,\partial T/\partial p$ and the *kick*
+$p \mapsto p - \tau\,\partial V/\partial q$. Every method here is one alternating
+product of them,
+
+$$\Phi_h = K_{b_s h} \circ D_{a_s h} \circ K_{b_{s-1} h} \circ \cdots \circ
+D_{a_1 h} \circ K_{b_0 h},$$
+
+which is symplectic because each factor is, and time-reversible when the
+coefficient sequences are palindromes. The methods differ only in their
+coefficient tables, so one engine (`AbstractSplittingSolver`) runs them all:
+
+- Symmetric *compositions* of Störmer–Verlet with weights $\gamma_1..\gamma_m$
+  (Yoshida, Kahan–Li, Sofroniou–Spaletta) become $a = \gamma$,
+  $b = (\gamma_1/2, (\gamma_1+\gamma_2)/2, \ldots, \gamma_m/2)$: adjacent
+  half-kicks merge, so a step costs $m$ force evaluations, not $2m$.
+- The final kick of a step is evaluated at the new state and reused as the first
+  kick of the next step (first-same-as-last), so a step costs exactly one force
+  evaluation per drift.
+
+The state update is accumulated as a small increment and added with Kahan's
+compensated summation (`lagjax.solvers.compensated`), so round-off in long runs
+grows like $\sqrt{n}$ (Brouwer's law) instead of linearly.
+
+Term convention (as `diffrax.SemiImplicitEuler`): `terms = (term_q, term_p)` and
+`y = (q, p)`; `term_q` is the drift, a function of `p`, and `term_p` the kick, a
+function of `q`.
+"""
+
+import itertools
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any, ClassVar
+
+import equinox as eqx
+import jax
+import jax.lax as lax
+from diffrax import (
+    RESULTS,
+    AbstractSolver,
+    AbstractTerm,
+    LocalLinearInterpolation,
+)
+
+from lagjax.solvers.compensated import compensated_add, zero_compensation
+
+if TYPE_CHECKING:
+    from typing import ClassVar as AbstractClassVar
+    from typing import ClassVar as AbstractVar
+else:
+    from equinox import AbstractClassVar, AbstractVar
+
+# (compensation for y or None, kick vector field at the current (t, q)).
+_SplittingState = tuple[Any, Any]
+
+
+def _merged_kicks(weights: Sequence[float]) -> tuple[float, ...]:
+    """Kick coefficients of a composition of kick–drift–kick Verlet steps."""
+    inner = [(left + right) / 2 for left, right in itertools.pairwise(weights)]
+    return (weights[0] / 2, *inner, weights[-1] / 2)
+
+
+def _palindrome(outer_half: Sequence[float], middle: float) -> tuple[float, ...]:
+    """`(w1, …, wk, middle, wk, …, w1)` from the outer half and the middle weight."""
+    return (*outer_half, middle, *reversed(outer_half))
+
+
+# --- Coefficient tables --------------------------------------------------------
+# Störmer–Verlet (velocity Verlet, kick–drift–kick); Hairer, Lubich & Wanner,
+# Geometric Numerical Integration (2006), eq. I.(3.4).
+_VERLET_WEIGHTS = (1.0,)
+
+# Yoshida (1990), Phys. Lett. A 150, 262, eq. (4.4): the fourth-order triple jump.
+_CBRT2 = 2.0 ** (1.0 / 3.0)
+_YOSHIDA4_WEIGHTS = (1 / (2 - _CBRT2), -_CBRT2 / (2 - _CBRT2), 1 / (2 - _CBRT2))
+
+# Yoshida (1990), Table 1, solution A (order 6, 7 stages); listed w3, w2, w1, and
+# the middle w0 = 1 − 2(w1 + w2 + w3) follows from consistency.
+_YOSHIDA6_OUTER = (0.784513610477560, 0.235573213359357, -1.17767998417887)
+_YOSHIDA6_WEIGHTS = _palindrome(_YOSHIDA6_OUTER, 1 - 2 * sum(_YOSHIDA6_OUTER))
+
+# Kahan & Li (1997), Math. Comp. 66, 1089, method s17odr8a (order 8, 17 stages);
+# also Hairer, Lubich & Wanner (2006), §V.3.2, eq. (3.12).
+_KAHAN_LI8_WEIGHTS = _palindrome(
+    (
+        0.13020248308889008087881763,
+        0.56116298177510838456196441,
+        -0.38947496264484728640807860,
+        0.15884190655515560089621075,
+        -0.39590389413323757733623154,
+        0.18453964097831570709183254,
+        0.25837438768632204729397911,
+        0.29501172360931029887096624,
+    ),
+    -0.60550853383003451169892108,
+)
+
+# Sofroniou & Spaletta (2005), Optim. Methods Softw. 20, 597, method s35odr10
+# (order 10, 35 stages); also Hairer, Lubich & Wanner (2006), §V.3.2.
+_SOFSPA10_WEIGHTS = _palindrome(
+    (
+        0.07879572252168641926390768,
+        0.31309610341510852776481247,
+        0.02791838323507806610952027,
+        -0.22959284159390709415121340,
+        0.13096206107716486317465686,
+        -0.26973340565451071434460973,
+        0.07497334315589143566613711,
+        0.11199342399981020488957508,
+        0.36613344954622675119314812,
+        -0.39910563013603589787862981,
+        0.10308739852747107731580277,
+        0.41143087395589023782070412,
+        -0.00486636058313526176219566,
+        -0.39203335370863990644808194,
+        0.05194250296244964703718290,
+        0.05066509075992449633587434,
+        0.04967437063972987905456880,
+    ),
+    0.04931773575959453791768001,
+)
+
+# Blanes & Moan (2002), J. Comput. Appl. Math. 142, 313, Table 2, method S6
+# (order 4, 6 stages): the 7 outer-flow coefficients a_i act on the kick (so the
+# step costs 6 force evaluations with first-same-as-last), the 6 inner b_i on
+# the drift; a4 = 1 − 2(a1 + a2 + a3) and b3 = 1/2 − (b1 + b2).
+_BM_A = (0.0792036964311957, 0.353172906049774, -0.0420650803577195)
+_BM_B = (0.209515106613362, -0.143851773179818)
+_BLANES_MOAN4_KICKS = _palindrome(_BM_A, 1 - 2 * sum(_BM_A))
+_BLANES_MOAN4_DRIFTS = (*_BM_B, 0.5 - sum(_BM_B), 0.5 - sum(_BM_B), *reversed(_BM_B))
+
+
+def _scaled(control: Any, coefficient: float) -> Any:
+    return jax.tree_util.tree_map(lambda c: coefficient * c, control)
+
+
+def _add(x: Any, y: Any) -> Any:
+    return jax.tree_util.tree_map(lambda a, b: a + b, x, y)
+
+
+def _add_to_state(y: Any, increment: Any, compensation: Any) -> tuple[Any, Any]:
+    """`y + increment`, Kahan-compensated unless `compensation` is None."""
+    if compensation is None:
+        return _add(y, increment), None
+    return compensated_add(y, increment, compensation)
+
+
+class AbstractSplittingSolver(AbstractSolver[_SplittingState]):
+    r"""A kick–drift–…–kick splitting method for $H = T(p) + V(q)$.
+
+    Subclasses set `kick_coefficients` $b_0..b_s$ and `drift_coefficients`
+    $a_1..a_s$ (each summing to one) and the nominal order; this class runs
+
+    $$p \mathrel{+}= b_0 h F(q);\quad \text{for } i = 1..s:\;
+    q \mathrel{+}= a_i h\, \partial T/\partial p(p),\;
+    p \mathrel{+}= b_i h F(q),$$
+
+    with $F = -\partial V/\partial q$. A kick sees the time reached by the drifts
+    before it ($t_0 + h\sum_{j \le i} a_j$), which keeps the order for a
+    time-dependent $V(q, t)$; a drift sees the midpoint of its own sub-interval.
+    Fixed step only: no error estimate is made.
+    """
+
+    kick_coefficients: AbstractClassVar[tuple[float, ...]]
+    drift_coefficients: AbstractClassVar[tuple[float, ...]]
+    nominal_order: AbstractClassVar[int]
+    compensated: AbstractVar[bool]
+
+    term_structure: ClassVar = (AbstractTerm, AbstractTerm)
+    interpolation_cls: ClassVar[Callable[..., LocalLinearInterpolation]] = (
+        LocalLinearInterpolation
+    )
+
+    def __check_init__(self):
+        kicks, drifts = self.kick_coefficients, self.drift_coefficients
+        if len(kicks) != len(drifts) + 1:
+            raise ValueError("a splitting table needs one more kick than drifts")
+        for name, table in (("kick", kicks), ("drift", drifts)):
+            if abs(sum(table) - 1) > 1e-13:
+                raise ValueError(f"{name} coefficients sum to {sum(table)}, not 1")
+
+    def order(self, terms: Any) -> int:
+        return self.nominal_order
+
+    def init(self, terms, t0, t1, y0, args) -> _SplittingState:
+        _, term_p = terms
+        q0, _ = y0
+        compensation = zero_compensation(y0) if self.compensated else None
+        return compensation, term_p.vf(t0, q0, args)
+
+    def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
+        _, term_p = terms
+        q0, p0 = y0
+        compensation, force = solver_state
+        if made_jump is not False:
+            # After a jump the stored force belongs to the old vector field.
+            force = lax.cond(made_jump, lambda: term_p.vf(t0, q0, args), lambda: force)
+        delta_q, delta_p = self._all_but_last_kick(terms, t0, t1, y0, args, force)
+
+        # The increments stay small, so they keep their low-order bits; they meet
+        # the (large) state once per step, through the compensated sum.
+        compensation_q, compensation_p = compensation or (None, None)
+        q1, compensation_q = _add_to_state(q0, delta_q, compensation_q)
+        # The last kick is evaluated at the stored new position, so it doubles as
+        # the first kick of the next step (first-same-as-last).
+        force = term_p.vf(t1, q1, args)
+        last_kick = _scaled(term_p.contr(t0, t1), self.kick_coefficients[-1])
+        delta_p = _add(delta_p, term_p.prod(force, last_kick))
+        p1, compensation_p = _add_to_state(p0, delta_p, compensation_p)
+
+        if compensation is not None:
+            compensation = (compensation_q, compensation_p)
+        y1 = (q1, p1)
+        dense_info = dict(y0=y0, y1=y1)
+        return y1, None, dense_info, (compensation, force), RESULTS.successful
+
+    def _all_but_last_kick(self, terms, t0, t1, y0, args, force) -> tuple[Any, Any]:
+        """Increments (Δq, Δp) of every drift and every kick but the last.
+
+        `force` is the kick vector field at (t0, q0).
+        """
+        term_q, term_p = terms
+        q0, p0 = y0
+        control_q, control_p = term_q.contr(t0, t1), term_p.contr(t0, t1)
+        kicks, drifts = self.kick_coefficients, self.drift_coefficients
+        delta_p = term_p.prod(force, _scaled(control_p, kicks[0]))
+        delta_q = None
+        drift_clock = 0.0  # fraction of the step the drifts have covered so far
+        for index, drift in enumerate(drifts):
+            t_drift = t0 + (drift_clock + drift / 2) * (t1 - t0)
+            p_now = _add(p0, delta_p)
+            dq = term_q.vf_prod(t_drift, p_now, args, _scaled(control_q, drift))
+            delta_q = dq if delta_q is None else _add(delta_q, dq)
+            drift_clock += drift
+            if index + 1 < len(drifts):
+                t_kick = t0 + drift_clock * (t1 - t0)
+                force = term_p.vf(t_kick, _add(q0, delta_q), args)
+                dp = term_p.prod(force, _scaled(control_p, kicks[index + 1]))
+                delta_p = _add(delta_p, dp)
+        return delta_q, delta_p
+
+    def func(self, terms, t0, y0, args):
+        term_q, term_p = terms
+        q0, p0 = y0
+        return term_q.vf(t0, p0, args), term_p.vf(t0, q0, args)
+
+
+_Coefficients = ClassVar[tuple[float, ...]]
+
+
+class StormerVerlet(AbstractSplittingSolver):
+    r"""Störmer–Verlet (velocity Verlet, leapfrog), order 2.
+
+    $$p_{1/2} = p_0 + \tfrac{h}{2} F(q_0),\quad
+    q_1 = q_0 + h\,\partial T/\partial p(p_{1/2}),\quad
+    p_1 = p_{1/2} + \tfrac{h}{2} F(q_1).$$
+
+    One force evaluation per step (the last kick is reused by the next step).
+
+    **Arguments:**
+
+    - `compensated`: add each step with Kahan compensated summation (default
+        `True`), so round-off grows like √steps over long runs.
+
+    ??? cite "References"
+
+        - Verlet, *Computer "experiments" on classical fluids*, Phys. Rev. 159,
+          98 (1967).
+        - Hairer, Lubich & Wanner, *Geometric Numerical Integration*, 2nd ed.,
+          Springer (2006), §I.3.
+    """
+
+    kick_coefficients: _Coefficients = _merged_kicks(_VERLET_WEIGHTS)
+    drift_coefficients: _Coefficients = _VERLET_WEIGHTS
+    nominal_order: ClassVar[int] = 2
+    compensated: bool = eqx.field(default=True, static=True)
+
+
+class Yoshida4(AbstractSplittingSolver):
+    r"""Yoshida's fourth-order triple jump: three Störmer–Verlet steps.
+
+    $$\Phi_h = \Phi^{SV}_{w_1 h} \circ \Phi^{SV}_{w_0 h} \circ \Phi^{SV}_{w_1 h},
+    \qquad w_1 = \frac{1}{2 - 2^{1/3}},\; w_0 = 1 - 2 w_1.$$
+
+    Three force evaluations per step.
+
+    **Arguments:**
+
+    - `compensated`: Kahan compensated summation of the update (default `True`).
+
+    ??? cite "References"
+
+        - Yoshida, *Construction of higher order symplectic integrators*,
+          Phys. Lett. A 150, 262 (1990).
+        - Forest & Ruth, *Fourth-order symplectic integration*, Physica D 43,
+          105 (1990).
+    """
+
+    kick_coefficients: _Coefficients = _merged_kicks(_YOSHIDA4_WEIGHTS)
+    drift_coefficients: _Coefficients = _YOSHIDA4_WEIGHTS
+    nominal_order: ClassVar[int] = 4
+    compensated: bool = eqx.field(default=True, static=True)
+
+
+class Yoshida6(AbstractSplittingSolver):
+    r"""Yoshida's sixth-order composition, solution A: seven Störmer–Verlet steps.
+
+    $$\Phi_h = \Phi^{SV}_{w_3 h} \circ \Phi^{SV}_{w_2 h} \circ \Phi^{SV}_{w_1 h}
+    \circ \Phi^{SV}_{w_0 h} \circ \Phi^{SV}_{w_1 h} \circ \Phi^{SV}_{w_2 h}
+    \circ \Phi^{SV}_{w_3 h}.$$
+
+    Seven force evaluations per step.
+
+    **Arguments:**
+
+    - `compensated`: Kahan compensated summation of the update (default `True`).
+
+    ??? cite "References"
+
+        - Yoshida, *Construction of higher order symplectic integrators*,
+          Phys. Lett. A 150, 262 (1990), Table 1, solution A.
+    """
+
+    kick_coefficients: _Coefficients = _merged_kicks(_YOSHIDA6_WEIGHTS)
+    drift_coefficients: _Coefficients = _YOSHIDA6_WEIGHTS
+    nominal_order: ClassVar[int] = 6
+    compensated: bool = eqx.field(default=True, static=True)
+
+
+class KahanLi8(AbstractSplittingSolver):
+    r"""Kahan and Li's eighth-order symmetric composition s17odr8a.
+
+    $$\Phi_h = \Phi^{SV}_{\gamma_{17} h} \circ \cdots \circ
+    \Phi^{SV}_{\gamma_1 h},\qquad \gamma_{18-i} = \gamma_i,$$
+
+    with weights optimised for small error constants. 17 force evaluations per
+    step.
+
+    **Arguments:**
+
+    - `compensated`: Kahan compensated summation of the update (default `True`).
+
+    ??? cite "References"
+
+        - Kahan & Li, *Composition constants for raising the orders of
+          unconventional schemes for ordinary differential equations*,
+          Math. Comp. 66, 1089 (1997).
+        - Hairer, Lubich & Wanner, *Geometric Numerical Integration*, 2nd ed.,
+          Springer (2006), §V.3.2.
+    """
+
+    kick_coefficients: _Coefficients = _merged_kicks(_KAHAN_LI8_WEIGHTS)
+    drift_coefficients: _Coefficients = _KAHAN_LI8_WEIGHTS
+    nominal_order: ClassVar[int] = 8
+    compensated: bool = eqx.field(default=True, static=True)
+
+
+class SofSpa10(AbstractSplittingSolver):
+    r"""Sofroniou and Spaletta's tenth-order symmetric composition s35odr10.
+
+    $$\Phi_h = \Phi^{SV}_{\gamma_{35} h} \circ \cdots \circ
+    \Phi^{SV}_{\gamma_1 h},\qquad \gamma_{36-i} = \gamma_i.$$
+
+    35 force evaluations per step; worth it when very high accuracy is wanted.
+
+    **Arguments:**
+
+    - `compensated`: Kahan compensated summation of the update (default `True`).
+
+    ??? cite "References"
+
+        - Sofroniou & Spaletta, *Derivation of symmetric composition constants
+          for symmetric integrators*, Optim. Methods Softw. 20, 597 (2005).
+        - Hairer, Lubich & Wanner, *Geometric Numerical Integration*, 2nd ed.,
+          Springer (2006), §V.3.2.
+    """
+
+    kick_coefficients: _Coefficients = _merged_kicks(_SOFSPA10_WEIGHTS)
+    drift_coefficients: _Coefficients = _SOFSPA10_WEIGHTS
+    nominal_order: ClassVar[int] = 10
+    compensated: bool = eqx.field(default=True, static=True)
+
+
+class BlanesMoan4(AbstractSplittingSolver):
+    r"""Blanes and Moan's optimised fourth-order splitting S6 (PRK, 6 stages).
+
+    $$\Phi_h = K_{a_1 h} D_{b_1 h} K_{a_2 h} D_{b_2 h} K_{a_3 h} D_{b_3 h}
+    K_{a_4 h} D_{b_3 h} K_{a_3 h} D_{b_2 h} K_{a_2 h} D_{b_1 h} K_{a_1 h}.$$
+
+    Not a composition of Verlet steps: the free coefficients minimise the
+    leading error terms, giving errors one to two orders of magnitude below
+    `Yoshida4` at equal cost. Six force evaluations per step.
+
+    **Arguments:**
+
+    - `compensated`: Kahan compensated summation of the update (default `True`).
+
+    ??? cite "References"
+
+        - Blanes & Moan, *Practical symplectic partitioned Runge–Kutta and
+          Runge–Kutta–Nyström methods*, J. Comput. Appl. Math. 142, 313
+          (2002), Table 2, method S6.
+    """
+
+    kick_coefficients: _Coefficients = _BLANES_MOAN4_KICKS
+    drift_coefficients: _Coefficients = _BLANES_MOAN4_DRIFTS
+    nominal_order: ClassVar[int] = 4
+    compensated: bool = eqx.field(default=True, static=True)
