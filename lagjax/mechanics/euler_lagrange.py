@@ -113,16 +113,13 @@ def _dense_system(lag_flat: FlatLagrangian, q, v, t):
     return mass, force - transport
 
 
-def _solve(mass, rhs, scalar: bool):
+def _solve_scalar(mass, rhs) -> tuple[jax.Array, jax.Array]:
     n = len(rhs)
-    if scalar and n <= UNROLLED_SOLVE_LIMIT:
+    if n <= UNROLLED_SOLVE_LIMIT:
         x, singular = solve_unrolled(mass, rhs)
         return jnp.stack(x), singular
-    if scalar:
-        full = [[mass[min(i, j)][max(i, j)] for j in range(n)] for i in range(n)]
-        mass = jnp.stack([jnp.stack(row) for row in full])
-        rhs = jnp.stack(rhs)
-    return solve_dense(mass, rhs)
+    full = [[mass[min(i, j)][max(i, j)] for j in range(n)] for i in range(n)]
+    return solve_dense(jnp.stack([jnp.stack(row) for row in full]), jnp.stack(rhs))
 
 
 # Compiled so that eager calls do not dispatch the scalar derivation op by op; under
@@ -161,16 +158,17 @@ def euler_lagrange_acceleration(
     def lag_flat(qf, vf, tt):
         return lagrangian(unravel(qf), unravel(vf), tt, args)
 
-    n = q_flat.shape[0]
-    scalar = n <= SCALAR_COORDINATE_LIMIT
-    if scalar:
+    force = None if generalized_force is None else ravel_pytree(generalized_force)[0]
+    if q_flat.shape[0] <= SCALAR_COORDINATE_LIMIT:
         mass, rhs = _scalar_system(lag_flat, q_flat, v_flat, t)
+        if force is not None:
+            rhs = [r + force[i] for i, r in enumerate(rhs)]
+        qddot, singular = _solve_scalar(mass, rhs)
     else:
-        mass, rhs = _dense_system(lag_flat, q_flat, v_flat, t)
-    if generalized_force is not None:
-        force_flat, _ = ravel_pytree(generalized_force)
-        rhs = [rhs[i] + force_flat[i] for i in range(n)] if scalar else rhs + force_flat
-    qddot, singular = _solve(mass, rhs, scalar)
+        mass, rhs_array = _dense_system(lag_flat, q_flat, v_flat, t)
+        if force is not None:
+            rhs_array = rhs_array + force
+        qddot, singular = solve_dense(mass, rhs_array)
     if check:
         qddot = raise_if_singular(qddot, singular, "The mass matrix ∂²L/∂q̇∂q̇")
     else:
