@@ -9,6 +9,7 @@ apply. The price is a nonlinear system for the stages at every step, solved here
 with optimistix to round-off so that the long-time energy error stays bounded.
 """
 
+import abc
 import math
 from collections.abc import Callable
 from typing import Any, ClassVar, NamedTuple, TypeAlias
@@ -19,7 +20,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
-from equinox import AbstractVar
 from jax.flatten_util import ravel_pytree
 from jaxtyping import Array
 
@@ -160,7 +160,11 @@ class AbstractGaussLegendre(diffrax.AbstractImplicitSolver[_SolverState]):
     interpolation_cls: ClassVar[Callable[..., diffrax.LocalLinearInterpolation]] = (
         diffrax.LocalLinearInterpolation
     )
-    tableau: AbstractVar[CollocationTableau]
+
+    @property
+    @abc.abstractmethod
+    def tableau(self) -> CollocationTableau:
+        """The method's Butcher tableau."""
 
     def order(self, terms: Any) -> int:
         del terms
@@ -284,4 +288,6 @@ class ImplicitMidpoint(AbstractGaussLegendre):
     root_finder: StageSolver = eqx.field(default_factory=default_stage_solver)
     root_find_max_steps: int = eqx.field(static=True, default=30)
 
-    tableau: ClassVar[CollocationTableau] = GAUSS_LEGENDRE_1
+    @property
+    def tableau(self) -> CollocationTableau:
+        return GAUSS_LEGENDRE_1

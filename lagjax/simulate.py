@@ -1,0 +1,233 @@
+"""`simulate`: integrate a mechanical system with a diffrax solver into a `Trajectory`.
+
+One entry point for every system and solver:
+
+| system | solver | integrated state, terms |
+|---|---|---|
+| `Lagrangian` | any non-partitioned solver (Tsit5, Dopri8, Kvaerno5, …) | (q, q̇), one `ODETerm` with q̈ from Euler–Lagrange |
+| `Lagrangian` | symplectic (GaussLegendre, ImplicitMidpoint) | (q, p) of its Legendre-transformed Hamiltonian |
+| any Hamiltonian | non-partitioned | (q, p), one `ODETerm` with Hamilton's equations |
+| `SeparableHamiltonian` | partitioned (StormerVerlet, Yoshida4, …) | (q, p), terms (∂T/∂p, −∂V/∂q) |
+
+A solver is *partitioned* when its diffrax `term_structure` is a pair of terms
+(lagjax's splitting methods and diffrax's `SemiImplicitEuler`). With `dt` the steps are
+fixed; without it the solver must be adaptive and `rtol`/`atol` control the error.
+Only the final state is saved unless `ts` (or `saveat`) asks for more.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .mechanics.hamiltonian import AbstractHamiltonian, SeparableHamiltonian
+from .mechanics.lagrangian import Lagrangian
+from .solvers.implicit import AbstractGaussLegendre
+from .solvers.splitting import Yoshida4
+from .trajectory import Trajectory
+
+System = Lagrangian | AbstractHamiltonian
+
+
+def is_partitioned(solver: diffrax.AbstractSolver) -> bool:
+    """True for solvers that step (q, p) with two terms (splitting methods)."""
+    structure = solver.term_structure
+    return isinstance(structure, tuple) and len(structure) == 2
+
+
+def default_solver(system: System, dt: Any) -> diffrax.AbstractSolver:
+    """Pick a solver from the system's structure (recorded in `Trajectory.stats`).
+
+    Fixed step (`dt` given): a separable Hamiltonian gets `Yoshida4` (explicit,
+    symplectic, order 4); anything else `GaussLegendre(stages=2)` (implicit,
+    symplectic, order 4). Adaptive (`dt` None): `Tsit5` with error control.
+    """
+    from .solvers.implicit import GaussLegendre
+
+    if dt is None:
+        return diffrax.Tsit5()
+    if isinstance(system, SeparableHamiltonian):
+        return Yoshida4()
+    return GaussLegendre(stages=2)
+
+
+def _terms_and_state(system: System, solver, y0, t0, args):
+    """diffrax terms, initial state and the system that state belongs to."""
+    if isinstance(system, Lagrangian) and not isinstance(solver, AbstractGaussLegendre):
+        if is_partitioned(solver):
+            raise ValueError(
+                f"{type(solver).__name__} is a splitting method for separable "
+                "Hamiltonians H = T(p) + V(q); integrate a Lagrangian with an implicit "
+                "symplectic method (GaussLegendre, ImplicitMidpoint) or an adaptive one."
+            )
+
+        def lagrangian_field(t, y, args):
+            q, qdot = y
+            return qdot, system.acceleration(q, qdot, t, args, check=False)
+
+        return diffrax.ODETerm(lagrangian_field), y0, system
+    if isinstance(system, Lagrangian):
+        hamiltonian = system.to_hamiltonian()
+        q0, qdot0 = y0
+        state0 = (q0, system.momentum(q0, qdot0, t0, args))
+        return _hamiltonian_terms(hamiltonian, solver), state0, hamiltonian
+    return _hamiltonian_terms(system, solver), y0, system
+
+
+def _hamiltonian_terms(system: AbstractHamiltonian, solver):
+    if is_partitioned(solver):
+        if not isinstance(system, SeparableHamiltonian):
+            raise ValueError(
+                f"{type(solver).__name__} is a splitting method and needs a "
+                "SeparableHamiltonian(T, V); for a general H use GaussLegendre, "
+                "ImplicitMidpoint or an adaptive diffrax solver."
+            )
+        return (
+            diffrax.ODETerm(lambda t, p, args: system.velocity(None, p, t, args)),
+            diffrax.ODETerm(lambda t, q, args: system.potential_force(q, t, args)),
+        )
+    return diffrax.ODETerm(lambda t, y, args: system.vector_field(y[0], y[1], t, args))
+
+
+def _stepping(solver, t0, t1, dt, rtol, atol):
+    if dt is not None:
+        return diffrax.ConstantStepSize(), dt
+    if not isinstance(solver, diffrax.AbstractAdaptiveSolver):
+        raise ValueError(
+            f"{type(solver).__name__} has no error estimate, so it cannot choose its own "
+            "step: pass dt."
+        )
+    return diffrax.PIDController(rtol=rtol, atol=atol), None
+
+
+def _check_times(t0, t1, dt):
+    concrete = all(isinstance(x, (int, float)) for x in (t0, t1))
+    if concrete and t1 == t0:
+        raise ValueError(f"t1 must differ from t0, both are {t0}")
+    if dt is not None and isinstance(dt, (int, float)):
+        if dt == 0 or not math.isfinite(dt):
+            raise ValueError(f"dt must be a finite non-zero number, got {dt}")
+        if concrete and (t1 - t0) * dt < 0:
+            raise ValueError(
+                f"dt = {dt} points away from t1 = {t1} (t0 = {t0}); use dt of the same "
+                "sign as t1 - t0"
+            )
+
+
+def _fixed_step_count(t0, t1, dt) -> int | None:
+    if dt is None or not all(isinstance(x, (int, float)) for x in (t0, t1, dt)):
+        return None
+    return math.ceil(abs((t1 - t0) / dt) * (1 + 1e-12)) + 1
+
+
+def simulate(
+    system: System,
+    y0: tuple[Any, Any],
+    t0: float = 0.0,
+    t1: float = 10.0,
+    dt: float | None = None,
+    solver: diffrax.AbstractSolver | None = None,
+    ts: Any = None,
+    args: Any = None,
+    rtol: float = 1e-8,
+    atol: float = 1e-8,
+    max_steps: int | None = None,
+    progress: bool = False,
+    *,
+    saveat: diffrax.SaveAt | None = None,
+    adjoint: diffrax.AbstractAdjoint | None = None,
+    throw: bool = True,
+) -> Trajectory:
+    """Integrate `system` from `y0` over [t0, t1].
+
+    **Arguments:**
+    - `system`: a `Lagrangian`, `Hamiltonian`, `SeparableHamiltonian` (or
+      `LegendreHamiltonian`).
+    - `y0`: `(q0, qdot0)` for a Lagrangian, `(q0, p0)` for a Hamiltonian.
+    - `dt`: fixed step; None for adaptive stepping with `rtol`, `atol`.
+    - `solver`: any diffrax solver or lagjax solver; None picks one by structure
+      (see `default_solver`) and records it in `stats["solver"]`.
+    - `ts`: times to save at; default only the final state. `saveat` overrides.
+    - `max_steps`: default: the exact count for fixed steps, 10⁵ adaptive.
+    - `progress`: show diffrax's text progress meter.
+    - `adjoint`: diffrax adjoint; pass `diffrax.ForwardMode()` to use `jax.jvp` /
+      `jax.jacfwd` through the solve (reverse mode works with the default).
+    - `throw`: raise on failure (max_steps reached, failed implicit solve, non-finite
+      state). With False the trajectory up to the failure is returned and
+      `result`/`stats["finite"]` say what happened.
+    """
+    _check_times(t0, t1, dt)
+    if solver is None:
+        solver = default_solver(system, dt)
+    terms, state0, integrated = _terms_and_state(system, solver, y0, t0, args)
+    controller, dt0 = _stepping(solver, t0, t1, dt, rtol, atol)
+    if max_steps is None:
+        max_steps = _fixed_step_count(t0, t1, dt) or 100_000
+    if saveat is None:
+        saveat = diffrax.SaveAt(ts=ts) if ts is not None else diffrax.SaveAt(t1=True)
+    solution = diffrax.diffeqsolve(
+        terms,
+        solver,
+        t0,
+        t1,
+        dt0,
+        state0,
+        args=args,
+        saveat=saveat,
+        stepsize_controller=controller,
+        max_steps=max_steps,
+        adjoint=adjoint
+        if adjoint is not None
+        else diffrax.RecursiveCheckpointAdjoint(),
+        progress_meter=diffrax.TextProgressMeter()
+        if progress
+        else diffrax.NoProgressMeter(),
+        throw=throw,
+    )
+    finite = jnp.all(
+        jnp.stack(
+            [jnp.all(jnp.isfinite(x)) for x in jax.tree_util.tree_leaves(solution.ys)]
+        )
+    )
+    ys = solution.ys
+    if throw:
+        ys = eqx.error_if(
+            ys,
+            ~finite,
+            "The integration produced a non-finite state (inf/NaN). Likely causes: a "
+            "singular mass matrix (degenerate L, or a coordinate singularity such as "
+            "Euler-angle gimbal lock), a step too large for a stiff problem, or a "
+            "collision/singular potential. Pass throw=False to inspect the trajectory.",
+        )
+    stats = dict(solution.stats)
+    stats["finite"] = finite
+    return Trajectory(
+        ts=solution.ts,
+        ys=ys,
+        system=integrated,
+        args=args,
+        run_stats=stats,
+        result=solution.result,
+        solver_name=type(solver).__name__,
+    )
+
+
+def sweep(system: System, y0s: Any, args_batch: Any = None, **kwargs) -> Trajectory:
+    """`simulate` over a batch of initial states (leading axis) and, optionally, args.
+
+    `args_batch=None` shares `kwargs.get("args")` across the batch. Returns one
+    `Trajectory` whose arrays have a leading batch axis.
+    """
+    shared_args = kwargs.pop("args", None)
+
+    def one(y0, args):
+        return simulate(system, y0, args=args, **kwargs)
+
+    if args_batch is None:
+        return jax.vmap(lambda y0: one(y0, shared_args))(y0s)
+    return jax.vmap(one)(y0s, args_batch)

@@ -1,0 +1,68 @@
+"""`Trajectory`: the saved states of a run and the quantities derived from them.
+
+Only the integrated state is stored — (q, q̇) for a Lagrangian integrated directly,
+(q, p) for a Hamiltonian (including a Lagrangian integrated through its Legendre
+transform). The other of q̇ and p, and the energy, are derived on demand.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import diffrax
+import equinox as eqx
+import jax
+
+from .mechanics.hamiltonian import AbstractHamiltonian
+from .mechanics.lagrangian import Lagrangian
+
+
+class Trajectory(eqx.Module):
+    """Saved times `ts` and states `ys = (q, q̇ or p)`; arrays have a leading time axis.
+
+    `stats` holds the solver used, diffrax's step counts and whether the state stayed
+    finite; `result` is diffrax's `RESULTS` value (successful or why not).
+    """
+
+    ts: jax.Array
+    ys: tuple[Any, Any]
+    system: Lagrangian | AbstractHamiltonian
+    args: Any
+    run_stats: dict[str, Any]
+    result: diffrax.RESULTS
+    solver_name: str = eqx.field(static=True)
+
+    @property
+    def stats(self) -> dict[str, Any]:
+        return {"solver": self.solver_name, **self.run_stats}
+
+    @property
+    def is_hamiltonian(self) -> bool:
+        return isinstance(self.system, AbstractHamiltonian)
+
+    @property
+    def q(self) -> Any:
+        return self.ys[0]
+
+    def _along(self, fn):
+        return jax.vmap(fn, in_axes=(0, 0, 0, None))(
+            self.ys[0], self.ys[1], self.ts, self.args
+        )
+
+    @property
+    def qdot(self) -> Any:
+        if isinstance(self.system, AbstractHamiltonian):
+            return self._along(self.system.velocity)
+        return self.ys[1]
+
+    @property
+    def p(self) -> Any:
+        if isinstance(self.system, Lagrangian):
+            return self._along(self.system.momentum)
+        return self.ys[1]
+
+    def energy(self) -> jax.Array:
+        """H(q, p, t) or the Jacobi integral h(q, q̇, t) at every saved time."""
+        if isinstance(self.system, Lagrangian):
+            return self._along(self.system.energy)
+        return self._along(self.system)
