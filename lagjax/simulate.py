@@ -189,6 +189,8 @@ def simulate(
         else diffrax.NoProgressMeter(),
         throw=throw,
     )
+    if solution.ts is None or solution.ys is None:
+        raise ValueError("saveat must save at least one state (t0, t1, ts or steps)")
     finite = jnp.all(
         jnp.stack(
             [jnp.all(jnp.isfinite(x)) for x in jax.tree_util.tree_leaves(solution.ys)]
