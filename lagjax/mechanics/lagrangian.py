@@ -125,8 +125,9 @@ class Lagrangian(eqx.Module):
     ) -> Any:
         """q̈ from the Euler–Lagrange equations (see `euler_lagrange_acceleration`).
 
-        A singular mass matrix raises a run-time error; `check=False` returns NaN
-        instead, which is cheaper inside integration loops that check their result.
+        A singular mass matrix raises a run-time error. `check=False` skips that
+        test (an exactly singular matrix then gives inf/NaN); it is the cheaper form
+        for integration loops that check their result, as `simulate` does.
         """
         check_same_structure(q, qdot, "q", "qdot")
         self(q, qdot, t, args)  # trace-time checks of L's output; no run-time cost

@@ -17,12 +17,16 @@ coefficient tables, so one engine (`AbstractSplittingSolver`) runs them all:
   $b = (\gamma_1/2, (\gamma_1+\gamma_2)/2, \ldots, \gamma_m/2)$: adjacent
   half-kicks merge, so a step costs $m$ force evaluations, not $2m$.
 - The final kick of a step is evaluated at the new state and reused as the first
-  kick of the next step (first-same-as-last), so a step costs exactly one force
-  evaluation per drift.
+  kick of the next step (first-same-as-last, kept in the solver state), so a step
+  costs exactly one force evaluation per drift. diffrax signals a changed state
+  or vector field between steps with `made_jump`, which triggers re-evaluation.
 
-The state update is accumulated as a small increment and added with Kahan's
-compensated summation (`lagjax.solvers.compensated`), so round-off in long runs
-grows like $\sqrt{n}$ (Brouwer's law) instead of linearly.
+Within a step the updates are accumulated as small increments Δq, Δp and added
+to the state once, with Kahan's compensated summation
+(`lagjax.solvers.compensated`). The round-off committed per step is then of the
+size of the increment's last bit instead of the state's, so over n steps it
+random-walks (Brouwer's law, ∝ √n) from a level about 1/h times lower and
+cannot build up into a drift of the invariants.
 
 Term convention (as `diffrax.SemiImplicitEuler`): `terms = (term_q, term_p)` and
 `y = (q, p)`; `term_q` is the drift, a function of `p`, and `term_p` the kick, a
@@ -68,10 +72,10 @@ def _palindrome(outer_half: Sequence[float], middle: float) -> tuple[float, ...]
 
 # --- Coefficient tables --------------------------------------------------------
 # Störmer–Verlet (velocity Verlet, kick–drift–kick); Hairer, Lubich & Wanner,
-# Geometric Numerical Integration (2006), eq. I.(3.4).
+# Acta Numerica 12, 399 (2003).
 _VERLET_WEIGHTS = (1.0,)
 
-# Yoshida (1990), Phys. Lett. A 150, 262, eq. (4.4): the fourth-order triple jump.
+# Yoshida (1990), Phys. Lett. A 150, 262: the fourth-order triple jump.
 _CBRT2 = 2.0 ** (1.0 / 3.0)
 _YOSHIDA4_WEIGHTS = (1 / (2 - _CBRT2), -_CBRT2 / (2 - _CBRT2), 1 / (2 - _CBRT2))
 
@@ -81,7 +85,8 @@ _YOSHIDA6_OUTER = (0.784513610477560, 0.235573213359357, -1.17767998417887)
 _YOSHIDA6_WEIGHTS = _palindrome(_YOSHIDA6_OUTER, 1 - 2 * sum(_YOSHIDA6_OUTER))
 
 # Kahan & Li (1997), Math. Comp. 66, 1089, method s17odr8a (order 8, 17 stages);
-# also Hairer, Lubich & Wanner (2006), §V.3.2, eq. (3.12).
+# also tabulated in Hairer, Lubich & Wanner, Geometric Numerical Integration
+# (2006), §V.3.2.
 _KAHAN_LI8_WEIGHTS = _palindrome(
     (
         0.13020248308889008087881763,
@@ -121,7 +126,7 @@ _SOFSPA10_WEIGHTS = _palindrome(
     0.04931773575959453791768001,
 )
 
-# Blanes & Moan (2002), J. Comput. Appl. Math. 142, 313, Table 2, method S6
+# Blanes & Moan (2002), J. Comput. Appl. Math. 142, 313, PRK method S6
 # (order 4, 6 stages): the 7 outer-flow coefficients a_i act on the kick (so the
 # step costs 6 force evaluations with first-same-as-last), the 6 inner b_i on
 # the drift; a4 = 1 − 2(a1 + a2 + a3) and b3 = 1/2 − (b1 + b2).
@@ -160,6 +165,12 @@ class AbstractSplittingSolver(AbstractSolver[_SplittingState]):
     before it ($t_0 + h\sum_{j \le i} a_j$), which keeps the order for a
     time-dependent $V(q, t)$; a drift sees the midpoint of its own sub-interval.
     Fixed step only: no error estimate is made.
+
+    ??? cite "References"
+
+        - McLachlan & Quispel, *Splitting methods*, Acta Numerica 11, 341 (2002).
+        - Hairer, Lubich & Wanner, *Geometric Numerical Integration*, 2nd ed.,
+          Springer (2006), §II.5 and §V.3.
     """
 
     kick_coefficients: AbstractClassVar[tuple[float, ...]]
@@ -258,17 +269,17 @@ class StormerVerlet(AbstractSplittingSolver):
 
     One force evaluation per step (the last kick is reused by the next step).
 
-    **Arguments:**
+    **Arguments** (the same for every solver in this module):
 
-    - `compensated`: add each step with Kahan compensated summation (default
-        `True`), so round-off grows like √steps over long runs.
+    - `compensated`: add each step's increment to the state with Kahan
+        compensated summation (default `True`); `False` adds it plainly.
 
     ??? cite "References"
 
         - Verlet, *Computer "experiments" on classical fluids*, Phys. Rev. 159,
           98 (1967).
-        - Hairer, Lubich & Wanner, *Geometric Numerical Integration*, 2nd ed.,
-          Springer (2006), §I.3.
+        - Hairer, Lubich & Wanner, *Geometric numerical integration illustrated
+          by the Störmer–Verlet method*, Acta Numerica 12, 399 (2003).
     """
 
     kick_coefficients: _Coefficients = _merged_kicks(_VERLET_WEIGHTS)
@@ -284,10 +295,6 @@ class Yoshida4(AbstractSplittingSolver):
     \qquad w_1 = \frac{1}{2 - 2^{1/3}},\; w_0 = 1 - 2 w_1.$$
 
     Three force evaluations per step.
-
-    **Arguments:**
-
-    - `compensated`: Kahan compensated summation of the update (default `True`).
 
     ??? cite "References"
 
@@ -312,10 +319,6 @@ class Yoshida6(AbstractSplittingSolver):
 
     Seven force evaluations per step.
 
-    **Arguments:**
-
-    - `compensated`: Kahan compensated summation of the update (default `True`).
-
     ??? cite "References"
 
         - Yoshida, *Construction of higher order symplectic integrators*,
@@ -336,10 +339,6 @@ class KahanLi8(AbstractSplittingSolver):
 
     with weights optimised for small error constants. 17 force evaluations per
     step.
-
-    **Arguments:**
-
-    - `compensated`: Kahan compensated summation of the update (default `True`).
 
     ??? cite "References"
 
@@ -364,10 +363,6 @@ class SofSpa10(AbstractSplittingSolver):
 
     35 force evaluations per step; worth it when very high accuracy is wanted.
 
-    **Arguments:**
-
-    - `compensated`: Kahan compensated summation of the update (default `True`).
-
     ??? cite "References"
 
         - Sofroniou & Spaletta, *Derivation of symmetric composition constants
@@ -389,18 +384,14 @@ class BlanesMoan4(AbstractSplittingSolver):
     K_{a_4 h} D_{b_3 h} K_{a_3 h} D_{b_2 h} K_{a_2 h} D_{b_1 h} K_{a_1 h}.$$
 
     Not a composition of Verlet steps: the free coefficients minimise the
-    leading error terms, giving errors one to two orders of magnitude below
+    leading error terms, giving errors an order of magnitude or more below
     `Yoshida4` at equal cost. Six force evaluations per step.
-
-    **Arguments:**
-
-    - `compensated`: Kahan compensated summation of the update (default `True`).
 
     ??? cite "References"
 
         - Blanes & Moan, *Practical symplectic partitioned Runge–Kutta and
           Runge–Kutta–Nyström methods*, J. Comput. Appl. Math. 142, 313
-          (2002), Table 2, method S6.
+          (2002), method S6.
     """
 
     kick_coefficients: _Coefficients = _BLANES_MOAN4_KICKS
