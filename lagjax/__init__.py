@@ -31,6 +31,8 @@ from .solvers.splitting import SofSpa10 as SofSpa10
 from .solvers.splitting import StormerVerlet as StormerVerlet
 from .solvers.splitting import Yoshida4 as Yoshida4
 from .solvers.splitting import Yoshida6 as Yoshida6
+from .solvers.variational import LagrangianTerm as LagrangianTerm
+from .solvers.variational import VariationalMidpoint as VariationalMidpoint
 from .trajectory import Trajectory as Trajectory
 
 __version__ = "0.1.0"

@@ -6,6 +6,7 @@ One entry point for every system and solver:
 |---|---|---|
 | `Lagrangian` | any non-partitioned solver (Tsit5, Dopri8, Kvaerno5, …) | (q, q̇), one `ODETerm` with q̈ from Euler–Lagrange |
 | `Lagrangian` | symplectic (GaussLegendre, ImplicitMidpoint) | (q, p) of its Legendre-transformed Hamiltonian |
+| `Lagrangian` | `VariationalMidpoint` | (q, p), discrete Euler–Lagrange equations of L |
 | any Hamiltonian | non-partitioned | (q, p), one `ODETerm` with Hamilton's equations |
 | `SeparableHamiltonian` | partitioned (StormerVerlet, Yoshida4, …) | (q, p), terms (∂T/∂p, −∂V/∂q) |
 
@@ -29,6 +30,7 @@ from .mechanics.hamiltonian import AbstractHamiltonian, SeparableHamiltonian
 from .mechanics.lagrangian import Lagrangian
 from .solvers.implicit import AbstractGaussLegendre
 from .solvers.splitting import Yoshida4
+from .solvers.variational import LagrangianTerm
 from .trajectory import Trajectory
 
 System = Lagrangian | AbstractHamiltonian
@@ -58,6 +60,15 @@ def default_solver(system: System, dt: Any) -> diffrax.AbstractSolver:
 
 def _terms_and_state(system: System, solver, y0, t0, args):
     """diffrax terms, initial state and the system that state belongs to."""
+    if solver.term_structure is LagrangianTerm:
+        if not isinstance(system, Lagrangian):
+            raise ValueError(
+                f"{type(solver).__name__} discretizes a Lagrangian; got "
+                f"{type(system).__name__}. Use .to_lagrangian() or another solver."
+            )
+        q0, qdot0 = y0
+        state0 = (q0, system.momentum(q0, qdot0, t0, args))
+        return LagrangianTerm(system), state0, system.to_hamiltonian()
     if isinstance(system, Lagrangian) and not isinstance(solver, AbstractGaussLegendre):
         if is_partitioned(solver):
             raise ValueError(
