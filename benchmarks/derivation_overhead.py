@@ -15,8 +15,8 @@ from __future__ import annotations
 
 import argparse
 import statistics
-from functools import partial
 import time
+from functools import partial
 
 import jax
 
