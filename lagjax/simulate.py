@@ -13,7 +13,10 @@ One entry point for every system and solver:
 A solver is *partitioned* when its diffrax `term_structure` is a pair of terms
 (lagjax's splitting methods and diffrax's `SemiImplicitEuler`). With `dt` the steps are
 fixed; without it the solver must be adaptive and `rtol`/`atol` control the error.
-Only the final state is saved unless `ts` (or `saveat`) asks for more.
+Only the final state is saved unless `ts` (or `saveat`) asks for more. Fixed steps
+with only the final state saved (and the default adjoint) run as a plain `lax.scan`
+over the solver's `step` (see `fixed_step.py`); everything else runs through
+`diffrax.diffeqsolve`.
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .fixed_step import integrate_fixed_steps
 from .mechanics.hamiltonian import AbstractHamiltonian, SeparableHamiltonian
 from .mechanics.lagrangian import Lagrangian
 from .solvers.implicit import AbstractGaussLegendre
@@ -176,6 +180,89 @@ def simulate(
     if solver is None:
         solver = default_solver(system, dt)
     terms, state0, integrated = _terms_and_state(system, solver, y0, t0, args)
+    scan_path = (
+        dt is not None
+        and ts is None
+        and saveat is None
+        and adjoint is None
+        and not progress
+        and max_steps is None
+        and all(isinstance(x, (int, float)) for x in (t0, t1, dt))
+    )
+    if scan_path:
+        assert dt is not None
+        y1, result, steps = integrate_fixed_steps(
+            terms, solver, t0, t1, dt, state0, args
+        )
+        if throw:
+            y1 = result.error_if(y1, result != diffrax.RESULTS.successful)
+        saved_ts = jnp.asarray([t1], dtype=float)
+        ys = jax.tree_util.tree_map(lambda x: jnp.asarray(x)[None], y1)
+        counts = jnp.asarray(steps)
+        stats = dict(
+            num_steps=counts, num_accepted_steps=counts, num_rejected_steps=0 * counts
+        )
+    else:
+        saved_ts, ys, stats, result = _diffeqsolve(
+            terms,
+            solver,
+            state0,
+            t0,
+            t1,
+            dt,
+            ts,
+            args,
+            rtol,
+            atol,
+            max_steps,
+            progress,
+            saveat,
+            adjoint,
+            throw,
+        )
+    finite = jnp.all(
+        jnp.stack([jnp.all(jnp.isfinite(x)) for x in jax.tree_util.tree_leaves(ys)])
+    )
+    if throw:
+        ys = eqx.error_if(ys, ~finite, _NON_FINITE_MESSAGE)
+    stats["finite"] = finite
+    return Trajectory(
+        ts=saved_ts,
+        ys=ys,
+        system=integrated,
+        args=args,
+        run_stats=stats,
+        result=result,
+        solver_name=type(solver).__name__,
+    )
+
+
+_NON_FINITE_MESSAGE = (
+    "The integration produced a non-finite state (inf/NaN). Likely causes: a "
+    "singular mass matrix (degenerate L, or a coordinate singularity such as "
+    "Euler-angle gimbal lock), a step too large for a stiff problem, or a "
+    "collision/singular potential. Pass throw=False to inspect the trajectory."
+)
+
+
+def _diffeqsolve(
+    terms,
+    solver,
+    state0,
+    t0,
+    t1,
+    dt,
+    ts,
+    args,
+    rtol,
+    atol,
+    max_steps,
+    progress,
+    saveat,
+    adjoint,
+    throw,
+):
+    """The general path: `diffrax.diffeqsolve` with saving, adjoints, adaptivity."""
     controller, dt0 = _stepping(solver, t0, t1, dt, rtol, atol)
     if max_steps is None:
         max_steps = _fixed_step_count(t0, t1, dt) or 100_000
@@ -202,32 +289,7 @@ def simulate(
     )
     if solution.ts is None or solution.ys is None:
         raise ValueError("saveat must save at least one state (t0, t1, ts or steps)")
-    finite = jnp.all(
-        jnp.stack(
-            [jnp.all(jnp.isfinite(x)) for x in jax.tree_util.tree_leaves(solution.ys)]
-        )
-    )
-    ys = solution.ys
-    if throw:
-        ys = eqx.error_if(
-            ys,
-            ~finite,
-            "The integration produced a non-finite state (inf/NaN). Likely causes: a "
-            "singular mass matrix (degenerate L, or a coordinate singularity such as "
-            "Euler-angle gimbal lock), a step too large for a stiff problem, or a "
-            "collision/singular potential. Pass throw=False to inspect the trajectory.",
-        )
-    stats = dict(solution.stats)
-    stats["finite"] = finite
-    return Trajectory(
-        ts=solution.ts,
-        ys=ys,
-        system=integrated,
-        args=args,
-        run_stats=stats,
-        result=solution.result,
-        solver_name=type(solver).__name__,
-    )
+    return solution.ts, solution.ys, dict(solution.stats), solution.result
 
 
 def sweep(system: System, y0s: Any, args_batch: Any = None, **kwargs) -> Trajectory:

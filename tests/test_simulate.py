@@ -184,3 +184,27 @@ def test_splitting_needs_separable_system():
     general = lj.Hamiltonian(lambda q, p: 0.5 * p**2 + 0.5 * q**2)
     with pytest.raises(ValueError, match="SeparableHamiltonian"):
         lj.simulate(general, (1.0, 0.0), dt=0.1, solver=lj.StormerVerlet())
+
+
+@pytest.mark.parametrize(
+    "solver", [lj.Yoshida4(), lj.GaussLegendre(stages=2), diffrax.Tsit5()]
+)
+def test_fixed_step_scan_path_matches_diffeqsolve(solver):
+    # Final-state-only runs take the lax.scan path; asking for ts takes diffeqsolve.
+    # t1 is not a multiple of dt, so both must shorten the last step alike.
+    system = oscillator_hamiltonian()
+    kwargs = dict(t1=1.234, dt=0.01, solver=solver, args=OMEGA)
+    fast = lj.simulate(system, (0.3, -0.2), **kwargs)
+    general = lj.simulate(system, (0.3, -0.2), ts=jnp.array([1.234]), **kwargs)
+    assert np.allclose(fast.q, general.q, atol=1e-13)
+    assert np.allclose(fast.p, general.p, atol=1e-13)
+    assert int(fast.stats["num_steps"]) == int(general.stats["num_steps"]) == 124
+
+
+def test_failed_implicit_solve_is_reported_on_the_scan_path():
+    stiff = lj.SeparableHamiltonian(lambda p: 0.5 * p**2, lambda q: 0.5e6 * q**2)
+    solver = lj.GaussLegendre(stages=2)  # fixed-point iteration diverges at ωh = 100
+    traj = lj.simulate(stiff, (1.0, 0.0), t1=1.0, dt=0.1, solver=solver, throw=False)
+    assert traj.result != diffrax.RESULTS.successful
+    with pytest.raises(Exception, match="nonlinear solver|non-finite"):
+        lj.simulate(stiff, (1.0, 0.0), t1=1.0, dt=0.1, solver=solver)
