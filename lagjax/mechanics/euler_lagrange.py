@@ -36,7 +36,7 @@ import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
 from .linalg import UNROLLED_SOLVE_LIMIT, raise_if_singular, solve_dense, solve_unrolled
-from .scalarize import as_object_array, objects_from_scalars, scalarize
+from .scalarize import scalar_argument_function
 
 # Up to this many coordinates the scalar formulation is used; its trace grows as n²
 # while the dense one stays compact. Chosen by benchmarks/derivation_overhead.py.
@@ -57,27 +57,11 @@ def partial_derivative(fn: Callable[..., jax.Array], index: int) -> Callable:
     return derivative
 
 
-def _lagrangian_of_scalars(lag_flat: FlatLagrangian, q, v, t) -> Callable:
-    """L as a function of 2n + 1 scalars (q_1..q_n, q̇_1..q̇_n, t).
-
-    Prefers the scalarized twin of L (pure scalar arithmetic, see `scalarize`); falls
-    back to stacking the scalars into the arrays L was written for.
-    """
-    n = q.shape[0]
-    twin = scalarize(lag_flat, q, v, t)
-    if twin is None:
-        return lambda *z: lag_flat(jnp.stack(z[:n]), jnp.stack(z[n : 2 * n]), z[2 * n])
-    return lambda *z: twin(
-        objects_from_scalars(z[:n]),
-        objects_from_scalars(z[n : 2 * n]),
-        as_object_array(z[2 * n]),
-    )
-
-
 def _scalar_system(lag_flat: FlatLagrangian, q, v, t):
     """Mass matrix (upper triangle, nested lists) and right-hand side, scalar form."""
     n = q.shape[0]
-    lagrangian_of_scalars = _lagrangian_of_scalars(lag_flat, q, v, t)
+    # L of the 2n + 1 scalars (q_1..q_n, q̇_1..q̇_n, t), in pure scalar arithmetic.
+    lagrangian_of_scalars = scalar_argument_function(lag_flat, q, v, t)
     z = (*(q[i] for i in range(n)), *(v[i] for i in range(n)), t)
     momenta = [partial_derivative(lagrangian_of_scalars, n + i) for i in range(n)]
     mass = [

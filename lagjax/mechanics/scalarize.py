@@ -18,12 +18,14 @@ function as written — the result is the same either way, only the speed differ
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 from collections.abc import Callable, Sequence
 from typing import Any
 
 import jax
 import jax.extend as jex
+import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
@@ -284,3 +286,38 @@ def objects_from_scalars(scalars: Sequence[Any]) -> np.ndarray:
     for i, scalar in enumerate(scalars):
         out[i] = scalar
     return out
+
+
+def scalar_argument_function(fn: Callable[..., Any], *examples: Any) -> Callable:
+    """`fn(*arrays)` re-expressed as a function of all the arrays' elements.
+
+    The returned function takes the elements of every argument, flattened and in
+    order, as separate JAX scalars. It evaluates the scalar twin of `fn` when
+    `scalarize` can build one, and otherwise stacks the scalars back into arrays.
+    """
+    shapes = [np.shape(example) for example in examples]
+    bounds = np.cumsum([0] + [math.prod(shape) for shape in shapes])
+    twin = scalarize(fn, *examples)
+
+    def chunks(scalars):
+        return [scalars[start:stop] for start, stop in itertools.pairwise(bounds)]
+
+    if twin is None:
+
+        def stacked(*scalars):
+            arrays = [
+                jnp.reshape(jnp.stack(chunk), shape)
+                for chunk, shape in zip(chunks(scalars), shapes)
+            ]
+            return fn(*arrays)
+
+        return stacked
+
+    def scalar(*scalars):
+        arrays = [
+            objects_from_scalars(chunk).reshape(shape)
+            for chunk, shape in zip(chunks(scalars), shapes)
+        ]
+        return twin(*arrays)
+
+    return scalar
