@@ -208,3 +208,12 @@ def test_failed_implicit_solve_is_reported_on_the_scan_path():
     assert traj.result != diffrax.RESULTS.successful
     with pytest.raises(Exception, match="nonlinear solver|non-finite"):
         lj.simulate(stiff, (1.0, 0.0), t1=1.0, dt=0.1, solver=solver)
+
+
+def test_progress_meter_runs_and_reports(capfd):
+    traj = lj.simulate(
+        oscillator_hamiltonian(), (1.0, 0.0), t1=1.0, dt=0.01, args=OMEGA, progress=True
+    )
+    jax.block_until_ready(traj.q)
+    assert "100.00%" in capfd.readouterr().out
+    assert np.isclose(traj.q[-1], np.cos(OMEGA), atol=1e-8)
