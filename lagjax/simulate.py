@@ -32,12 +32,14 @@ import jax.numpy as jnp
 from .fixed_step import integrate_fixed_steps
 from .mechanics.hamiltonian import AbstractHamiltonian, SeparableHamiltonian
 from .mechanics.lagrangian import Lagrangian
+from .scenes.base import AbstractScene
 from .solvers.implicit import AbstractGaussLegendre
 from .solvers.splitting import Yoshida4
 from .solvers.variational import LagrangianTerm
 from .trajectory import Trajectory
 
-System = Lagrangian | AbstractHamiltonian
+MechanicalSystem = Lagrangian | AbstractHamiltonian
+System = MechanicalSystem | AbstractScene
 
 
 def is_partitioned(solver: diffrax.AbstractSolver) -> bool:
@@ -46,7 +48,7 @@ def is_partitioned(solver: diffrax.AbstractSolver) -> bool:
     return isinstance(structure, tuple) and len(structure) == 2
 
 
-def default_solver(system: System, dt: Any) -> diffrax.AbstractSolver:
+def default_solver(system: MechanicalSystem, dt: Any) -> diffrax.AbstractSolver:
     """Pick a solver from the system's structure (recorded in `Trajectory.stats`).
 
     Fixed step (`dt` given): a separable Hamiltonian gets `Yoshida4` (explicit,
@@ -62,7 +64,7 @@ def default_solver(system: System, dt: Any) -> diffrax.AbstractSolver:
     return GaussLegendre(stages=2)
 
 
-def _terms_and_state(system: System, solver, y0, t0, args):
+def _terms_and_state(system: MechanicalSystem, solver, y0, t0, args):
     """diffrax terms, initial state and the system that state belongs to."""
     if solver.term_structure is LagrangianTerm:
         if not isinstance(system, Lagrangian):
@@ -162,7 +164,8 @@ def simulate(
 
     **Arguments:**
     - `system`: a `Lagrangian`, `Hamiltonian`, `SeparableHamiltonian` (or
-      `LegendreHamiltonian`).
+      `LegendreHamiltonian`), or a scene (`lagjax.scenes`), whose parameters are
+      then passed as `args`.
     - `y0`: `(q0, qdot0)` for a Lagrangian, `(q0, p0)` for a Hamiltonian.
     - `dt`: fixed step; None for adaptive stepping with `rtol`, `atol`.
     - `solver`: any diffrax solver or lagjax solver; None picks one by structure
@@ -177,6 +180,9 @@ def simulate(
       `result`/`stats["finite"]` say what happened.
     """
     _check_times(t0, t1, dt)
+    if isinstance(system, AbstractScene):
+        # A scene's parameters are its fields; its physics reads them from args.
+        system, args = system.system(), system
     if solver is None:
         solver = default_solver(system, dt)
     terms, state0, integrated = _terms_and_state(system, solver, y0, t0, args)

@@ -1,0 +1,57 @@
+"""`AbstractScene`: a worked example — a system, its parameters, a start, its answers.
+
+A scene is an equinox Module whose physical parameters are array fields. Its
+physics is a plain function `L(q, qdot, t, scene)` (or `H(q, p, t, scene)`, or
+`T(p, t, scene)` and `V(q, t, scene)`) that reads the parameters from the scene
+passed as `args`; `system()` wraps that function in the right lagjax class — a
+`SeparableHamiltonian` when the physics is separable, a `Lagrangian` with no time
+dependence when autonomous, and so on, so nothing the scene does not need is
+computed. Because the parameters travel as `args`, `jax.vmap` over a batch of
+scenes is a parameter sweep:
+
+    scenes = jax.vmap(lambda g: SimplePendulum(g=g))(gs)
+    finals = jax.vmap(lambda s: lj.simulate(s, s.initial_state(), t1=1.0, dt=1e-3).q)(scenes)
+
+A scene holds physics and known answers only: no derivation, no integration.
+`checks(trajectory)` compares what a run measured with the scene's closed forms, for
+the command line and notebooks.
+"""
+
+from __future__ import annotations
+
+import abc
+from typing import Any, ClassVar
+
+import equinox as eqx
+import jax
+
+from lagjax.mechanics.hamiltonian import AbstractHamiltonian
+from lagjax.mechanics.lagrangian import Lagrangian
+
+
+class AbstractScene(eqx.Module):
+    """Base of all scenes. Subclasses are final equinox Modules.
+
+    Class attributes: `default_t1` (s), `default_dt` (s, for fixed-step solvers; the
+    scene's own scale) and `state_kind` ("velocity" when `initial_state` returns
+    (q0, q̇0), "momentum" for (q0, p0)).
+    """
+
+    default_t1: ClassVar[float]
+    default_dt: ClassVar[float]
+
+    @abc.abstractmethod
+    def system(self) -> Lagrangian | AbstractHamiltonian:
+        """The lagjax system; integrate it with `args=self` (simulate does)."""
+
+    @abc.abstractmethod
+    def initial_state(self) -> tuple[Any, Any]:
+        """A representative start: (q0, q̇0) for a Lagrangian, (q0, p0) otherwise."""
+
+    def checks(self, trajectory: Any) -> dict[str, tuple[jax.Array, jax.Array]]:
+        """{name: (measured, expected)} from a trajectory of this scene.
+
+        The default has none; scenes with closed forms override it.
+        """
+        del trajectory
+        return {}
