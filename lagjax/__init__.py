@@ -22,7 +22,6 @@ from .mechanics.modes import equilibrium as equilibrium
 from .mechanics.modes import normal_modes as normal_modes
 from .mechanics.modes import stiffness_matrices as stiffness_matrices
 from .simulate import simulate as simulate
-from .simulate import sweep as sweep
 from .solvers.implicit import GaussLegendre as GaussLegendre
 from .solvers.implicit import ImplicitMidpoint as ImplicitMidpoint
 from .solvers.splitting import BlanesMoan4 as BlanesMoan4
@@ -33,6 +32,7 @@ from .solvers.splitting import Yoshida4 as Yoshida4
 from .solvers.splitting import Yoshida6 as Yoshida6
 from .solvers.variational import LagrangianTerm as LagrangianTerm
 from .solvers.variational import VariationalMidpoint as VariationalMidpoint
+from .sweep import sweep as sweep
 from .trajectory import Trajectory as Trajectory
 
 __version__ = "0.1.0"

@@ -295,20 +295,6 @@ def _diffeqsolve(
     )
     if solution.ts is None or solution.ys is None:
         raise ValueError("saveat must save at least one state (t0, t1, ts or steps)")
-    return solution.ts, solution.ys, dict(solution.stats), solution.result
-
-
-def sweep(system: System, y0s: Any, args_batch: Any = None, **kwargs) -> Trajectory:
-    """`simulate` over a batch of initial states (leading axis) and, optionally, args.
-
-    `args_batch=None` shares `kwargs.get("args")` across the batch. Returns one
-    `Trajectory` whose arrays have a leading batch axis.
-    """
-    shared_args = kwargs.pop("args", None)
-
-    def one(y0, args):
-        return simulate(system, y0, args=args, **kwargs)
-
-    if args_batch is None:
-        return jax.vmap(lambda y0: one(y0, shared_args))(y0s)
-    return jax.vmap(one)(y0s, args_batch)
+    # Arrays only, so trajectories batch under vmap and jit.
+    stats = {key: jnp.asarray(value) for key, value in solution.stats.items()}
+    return solution.ts, solution.ys, stats, solution.result

@@ -1,0 +1,42 @@
+"""Rigid bodies: inertia, orientation (Euler angles, quaternions) and dynamics.
+
+- `inertia`, `solids`: inertia tensors, the axis theorems, principal axes.
+- `euler_angles`, `quaternion`: orientations and angular velocities.
+"""
+
+from .euler_angles import (
+    euler_zxz_body_angular_velocity as euler_zxz_body_angular_velocity,
+)
+from .euler_angles import euler_zxz_matrix as euler_zxz_matrix
+from .euler_angles import (
+    euler_zxz_space_angular_velocity as euler_zxz_space_angular_velocity,
+)
+from .euler_angles import euler_zxz_to_quaternion as euler_zxz_to_quaternion
+from .euler_angles import euler_zxz_to_rotation as euler_zxz_to_rotation
+from .euler_angles import rotation_to_euler_zxz as rotation_to_euler_zxz
+from .inertia import TopKind as TopKind
+from .inertia import centre_of_mass as centre_of_mass
+from .inertia import parallel_axis as parallel_axis
+from .inertia import perpendicular_axis as perpendicular_axis
+from .inertia import point_mass_inertia as point_mass_inertia
+from .inertia import principal_axes as principal_axes
+from .inertia import top_kind as top_kind
+from .quaternion import axis_angle_quaternion as axis_angle_quaternion
+from .quaternion import body_angular_velocity as body_angular_velocity
+from .quaternion import matrix_to_quaternion as matrix_to_quaternion
+from .quaternion import quaternion_conjugate as quaternion_conjugate
+from .quaternion import quaternion_multiply as quaternion_multiply
+from .quaternion import quaternion_rate as quaternion_rate
+from .quaternion import quaternion_to_matrix as quaternion_to_matrix
+from .quaternion import rotate as rotate
+from .quaternion import rotation_vector_quaternion as rotation_vector_quaternion
+from .quaternion import skew as skew
+from .quaternion import space_angular_velocity as space_angular_velocity
+from .solids import box_inertia as box_inertia
+from .solids import cone_apex_distance as cone_apex_distance
+from .solids import solid_cone_inertia as solid_cone_inertia
+from .solids import solid_cylinder_inertia as solid_cylinder_inertia
+from .solids import solid_sphere_inertia as solid_sphere_inertia
+from .solids import spherical_shell_inertia as spherical_shell_inertia
+from .solids import thin_disc_inertia as thin_disc_inertia
+from .solids import thin_rod_inertia as thin_rod_inertia
