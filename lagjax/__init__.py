@@ -5,6 +5,7 @@ derives the equations of motion, Legendre transforms, Poisson brackets and norma
 modes by automatic differentiation.
 """
 
+from . import scenes as scenes
 from .mechanics.brackets import poisson_bracket as poisson_bracket
 from .mechanics.canonical import GeneratingFunction as GeneratingFunction
 from .mechanics.canonical import is_canonical as is_canonical
