@@ -125,8 +125,21 @@ def _perturbed_batch(state, batch: int):
     return jax.tree_util.tree_map(spread, state)
 
 
+def _save_times(t1: float, dt: float | None) -> jax.Array:
+    """About SAVED_POINTS times; on the step grid for fixed steps, so the saved
+    states are the solver's own, not interpolated between steps."""
+    if dt is None:
+        return jnp.linspace(0.0, t1, SAVED_POINTS)
+    steps = int(np.floor(abs(t1 / dt) + 1e-9))
+    stride = max(1, steps // (SAVED_POINTS - 1))
+    grid = np.arange(0, steps + 1, stride) * dt
+    return jnp.asarray(
+        np.unique(np.append(grid, t1)) if t1 > 0 else np.append(grid, t1)
+    )
+
+
 def _run(scene, t1: float, dt: float | None, solver, batch: int | None):
-    ts = jnp.linspace(0.0, t1, SAVED_POINTS)
+    ts = _save_times(t1, dt)
     steps = abs(t1 / dt) if dt else 0
     kwargs = dict(t1=t1, dt=dt, solver=solver, ts=ts, progress=steps > PROGRESS_STEPS)
     if dt is not None:

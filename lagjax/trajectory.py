@@ -12,6 +12,7 @@ from typing import Any
 import diffrax
 import equinox as eqx
 import jax
+import jax.numpy as jnp
 
 from .mechanics.hamiltonian import AbstractHamiltonian
 from .mechanics.lagrangian import Lagrangian
@@ -45,9 +46,19 @@ class Trajectory(eqx.Module):
         return self.ys[0]
 
     def _along(self, fn):
-        return jax.vmap(fn, in_axes=(0, 0, 0, None))(
-            self.ys[0], self.ys[1], self.ts, self.args
-        )
+        """Apply fn(q, second, t, args) at every saved time (and batch member).
+
+        A batched trajectory (from `lj.sweep` or `jax.vmap` of `simulate`) has extra
+        leading axes on `ts`, the states and `args`; each is mapped over.
+        """
+
+        def along_time(q, second, ts, args):
+            return jax.vmap(fn, in_axes=(0, 0, 0, None))(q, second, ts, args)
+
+        mapped = along_time
+        for _ in range(jnp.ndim(self.ts) - 1):
+            mapped = jax.vmap(mapped)
+        return mapped(self.ys[0], self.ys[1], self.ts, self.args)
 
     @property
     def qdot(self) -> Any:

@@ -65,3 +65,13 @@ def test_sweep_shares_args_and_validates_batch():
 
     with pytest.raises(ValueError, match="same leading size"):
         lj.sweep(system, (q0s, jnp.zeros(2)), t1=1.0, dt=0.01, args=2.0)
+
+
+def test_batched_trajectory_derives_p_qdot_and_energy():
+    # Extra leading (batch) axes on a Trajectory are mapped over, not mistaken for q.
+    lag = lj.Lagrangian(lambda q, v: 0.5 * v**2 - 0.5 * q**2)
+    q0s = jnp.array([1.0, 2.0])
+    batched = lj.sweep(lag, (q0s, jnp.zeros(2)), t1=1.0, dt=0.01, ts=jnp.linspace(0, 1, 3))
+    assert np.allclose(batched.energy(), 0.5 * q0s[:, None] ** 2 * np.ones(3), rtol=1e-8)
+    assert np.allclose(batched.p, batched.qdot)
+    assert np.allclose(batched.p[:, -1], -q0s * np.sin(1.0), atol=1e-8)

@@ -32,9 +32,9 @@ from lagjax.mechanics.lagrangian import Lagrangian
 class AbstractScene(eqx.Module):
     """Base of all scenes. Subclasses are final equinox Modules.
 
-    Class attributes: `default_t1` (s), `default_dt` (s, for fixed-step solvers; the
-    scene's own scale) and `state_kind` ("velocity" when `initial_state` returns
-    (q0, q̇0), "momentum" for (q0, p0)).
+    Class attributes: `default_t1` (s) and `default_dt` (s, for fixed-step solvers;
+    the scene's own scale). Store parameters as `jnp.asarray(x, dtype=float)`: weakly
+    typed scalars would make differently built scenes compile separately.
     """
 
     default_t1: ClassVar[float]
