@@ -32,8 +32,10 @@ FORMS = (KeplerCartesian, KeplerPolar)
 
 
 def run_one_orbit(scene):
-    """One period from periapsis, saved at 9 equally spaced times: the trajectory,
-    its Cartesian (position, velocity) and the scene's checks."""
+    """One period from periapsis, saved at 9 equally spaced times.
+
+    Returns the trajectory, its Cartesian (position, velocity) and the checks.
+    """
     period = scene.period()
     trajectory = lj.simulate(
         scene,

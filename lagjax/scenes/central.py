@@ -15,9 +15,10 @@ constant) — so that the two derivations can be checked against each other and
 against the closed forms. Both start at periapsis on the $+x$ axis, moving
 counter-clockwise.
 
-References: Goldstein, Poole & Safko, *Classical Mechanics*, 3rd ed., §3.7–3.9
-(orbit equation, Kepler's equation) and §3.9 (the Laplace–Runge–Lenz vector); the
-course text §6.2 and §6.5 (cyclic θ, conserved angular momentum in a central field).
+References: Goldstein, Poole & Safko, *Classical Mechanics*, 3rd ed., §3.7 (the
+Kepler orbit), §3.8 (Kepler's equation, motion in time) and §3.9 (the
+Laplace–Runge–Lenz vector); the course text §6.2 and §6.5 (cyclic θ, conserved
+angular momentum in a central field).
 """
 
 from __future__ import annotations
@@ -29,7 +30,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-import lagjax as lj
+from lagjax.mechanics.hamiltonian import SeparableHamiltonian
+from lagjax.mechanics.lagrangian import Lagrangian
 from lagjax.scenes.base import AbstractScene
 
 # Newton's method on Kepler's equation started at 𝓔 = π converges monotonically for
@@ -169,7 +171,7 @@ def _cartesian_potential(q, t, scene):
 
 
 class KeplerCartesian(AbstractKeplerProblem):
-    r"""Kepler problem in the plane, $q = (x, y)$, as a separable Hamiltonian.
+    r"""Kepler problem in Cartesian coordinates (x, y), as a separable Hamiltonian.
 
     $$ H = \frac{p_x^2 + p_y^2}{2m} - \frac{m\mu}{\sqrt{x^2 + y^2}}. $$
 
@@ -200,8 +202,8 @@ class KeplerCartesian(AbstractKeplerProblem):
         self.gravitational_parameter = jnp.asarray(gravitational_parameter, dtype=float)
         self.mass = jnp.asarray(mass, dtype=float)
 
-    def system(self) -> lj.SeparableHamiltonian:
-        return lj.SeparableHamiltonian(_cartesian_kinetic, _cartesian_potential)
+    def system(self) -> SeparableHamiltonian:
+        return SeparableHamiltonian(_cartesian_kinetic, _cartesian_potential)
 
     def initial_state(self) -> tuple[jax.Array, jax.Array]:
         zero = jnp.zeros_like(self.eccentricity)
@@ -220,7 +222,7 @@ def _polar_lagrangian(q, qdot, t, scene):
 
 
 class KeplerPolar(AbstractKeplerProblem):
-    r"""Kepler problem in polar coordinates $q = (r, \theta)$, as a Lagrangian.
+    r"""Kepler problem in polar coordinates (r, θ), as a Lagrangian.
 
     $$ L = \tfrac12 m(\dot r^2 + r^2\dot\theta^2) + \frac{m\mu}{r}. $$
 
@@ -249,8 +251,8 @@ class KeplerPolar(AbstractKeplerProblem):
         self.gravitational_parameter = jnp.asarray(gravitational_parameter, dtype=float)
         self.mass = jnp.asarray(mass, dtype=float)
 
-    def system(self) -> lj.Lagrangian:
-        return lj.Lagrangian(_polar_lagrangian, quadratic_in_velocity=True)
+    def system(self) -> Lagrangian:
+        return Lagrangian(_polar_lagrangian, quadratic_in_velocity=True)
 
     def initial_state(self) -> tuple[jax.Array, jax.Array]:
         periapsis = self.periapsis_distance()

@@ -27,7 +27,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-import lagjax as lj
+from lagjax.mechanics.hamiltonian import SeparableHamiltonian
+from lagjax.mechanics.lagrangian import Lagrangian
 from lagjax.scenes.base import AbstractScene
 
 # --- Uniform gravity ------------------------------------------------------------------
@@ -51,13 +52,10 @@ class AbstractUniformAcceleration(AbstractScene):
         """The constant ÿ."""
 
     def position(self, t) -> jax.Array:
-        """y(t) = y₀ + v₀t + ½at²."""
+        """y(t) = y₀ + v₀t + ½at²: y₀ plus the mean velocity over [0, t] times t."""
         t = jnp.asarray(t)
-        return (
-            self.initial_position
-            + self.initial_velocity * t
-            + 0.5 * self.acceleration() * t**2
-        )
+        mean_velocity = self.initial_velocity + 0.5 * self.acceleration() * t
+        return self.initial_position + mean_velocity * t
 
     def velocity(self, t) -> jax.Array:
         """ẏ(t) = v₀ + at."""
@@ -83,7 +81,7 @@ def _free_fall_potential(y, t, scene):
 
 
 class FreeFall(AbstractUniformAcceleration):
-    r"""A body falling in uniform gravity; $y$ is the distance fallen (downwards).
+    r"""A body falling in uniform gravity; y is the distance fallen (downwards).
 
     $$ L = \tfrac12 m\dot y^2 + m g y, \qquad H = \frac{p^2}{2m} - m g y, $$
 
@@ -100,7 +98,7 @@ class FreeFall(AbstractUniformAcceleration):
     initial_velocity: jax.Array
 
     default_t1: ClassVar[float] = 1.0
-    default_dt: ClassVar[float] = 0.01
+    default_dt: ClassVar[float] = 1.0 / 400  # saving at 401 points falls on steps
 
     def __init__(
         self, mass=1.0, gravity=9.81, initial_position=0.0, initial_velocity=-5.0
@@ -110,8 +108,8 @@ class FreeFall(AbstractUniformAcceleration):
         self.initial_position = jnp.asarray(initial_position, dtype=float)
         self.initial_velocity = jnp.asarray(initial_velocity, dtype=float)
 
-    def system(self) -> lj.SeparableHamiltonian:
-        return lj.SeparableHamiltonian(_free_fall_kinetic, _free_fall_potential)
+    def system(self) -> SeparableHamiltonian:
+        return SeparableHamiltonian(_free_fall_kinetic, _free_fall_potential)
 
     def initial_state(self) -> tuple[jax.Array, jax.Array]:
         return self.initial_position, self.mass * self.initial_velocity
@@ -131,9 +129,10 @@ def _atwood_potential(y, t, scene):
 
 
 class AtwoodMachine(AbstractUniformAcceleration):
-    r"""Two masses on a rope over a massless, frictionless pulley (the course text §3.4).
+    r"""Atwood's machine: two masses on a rope over a massless, frictionless pulley.
 
-    $y$ is the depth of $M_1$ below the pulley, $l - y$ that of $M_2$ (eq. 3.78–3.80):
+    The course text §3.4, example 2: $y$ is the depth of $M_1$ below the pulley,
+    $l - y$ that of $M_2$ (eq. 3.78–3.80),
 
     $$ L = \tfrac12(M_1 + M_2)\dot y^2 + M_1 g y + M_2 g(l - y), \qquad
        H = \frac{p^2}{2(M_1 + M_2)} - M_1 g y - M_2 g (l - y), $$
@@ -153,7 +152,7 @@ class AtwoodMachine(AbstractUniformAcceleration):
     initial_velocity: jax.Array
 
     default_t1: ClassVar[float] = 0.5
-    default_dt: ClassVar[float] = 0.01
+    default_dt: ClassVar[float] = 0.5 / 400  # saving at 401 points falls on steps
 
     def __init__(
         self,
@@ -171,8 +170,8 @@ class AtwoodMachine(AbstractUniformAcceleration):
         self.initial_position = jnp.asarray(initial_position, dtype=float)
         self.initial_velocity = jnp.asarray(initial_velocity, dtype=float)
 
-    def system(self) -> lj.SeparableHamiltonian:
-        return lj.SeparableHamiltonian(_atwood_kinetic, _atwood_potential)
+    def system(self) -> SeparableHamiltonian:
+        return SeparableHamiltonian(_atwood_kinetic, _atwood_potential)
 
     def initial_state(self) -> tuple[jax.Array, jax.Array]:
         total_mass = self.mass_1 + self.mass_2
@@ -200,16 +199,41 @@ def _perpendicular(vectors, direction):
     return vectors - along * direction
 
 
-def _rotation_angle_about(direction, before, after):
-    """Signed angle (right-handed about `direction`) from `before` to `after`."""
-    sine = jnp.sum(jnp.cross(before, after) * direction, axis=-1)
-    return jnp.arctan2(sine, jnp.sum(before * after, axis=-1))
+def _plane_basis(direction):
+    """Rows e₁, e₂: orthonormal, ⊥ the unit `direction`, with e₁ × e₂ = direction."""
+    # Any axis not nearly parallel to the direction gives a well-conditioned e₁.
+    axis = jnp.where(jnp.abs(direction[0]) < 0.9, jnp.eye(3)[0], jnp.eye(3)[1])
+    first = jnp.cross(direction, axis)
+    first = first / jnp.linalg.norm(first)
+    return jnp.stack([first, jnp.cross(direction, first)])
+
+
+def _fit_circle(points):
+    """(centre, radius) of the circle through 2-D `points` (N, 2), least squares.
+
+    |p|² = 2 c·p + k is linear in (c, k) (Kåsa's fit), exact for points on a circle;
+    then ρ² = k + |c|².
+    """
+    design = jnp.concatenate([2 * points, jnp.ones_like(points[:, :1])], axis=1)
+    solution = jnp.linalg.lstsq(design, jnp.sum(points**2, axis=1))[0]
+    centre = solution[:2]
+    return centre, jnp.sqrt(solution[2] + jnp.sum(centre**2))
+
+
+def _accumulated_turn(vectors):
+    """Total signed angle swept by the 2-D `vectors` (N, 2), counter-clockwise positive.
+
+    Each step must turn by less than π for its angle to be unambiguous.
+    """
+    before, after = vectors[:-1], vectors[1:]
+    cross = before[:, 0] * after[:, 1] - before[:, 1] * after[:, 0]
+    return jnp.sum(jnp.arctan2(cross, jnp.sum(before * after, axis=1)))
 
 
 class ChargeInUniformFields(AbstractScene):
-    r"""A point charge in uniform static fields $\mathbf E$ and $\mathbf B$, $q = \mathbf r \in \mathbb R^3$.
+    r"""A point charge in uniform static electric and magnetic fields, in 3-D.
 
-    The Lagrangian of the course text §3.5 (eq. 3.99), in the gauge
+    $q = \mathbf r$. The Lagrangian of the course text §3.5 (eq. 3.99), in the gauge
     $\phi = -\mathbf E\cdot\mathbf r$, $\mathbf A = \tfrac12\mathbf B\times\mathbf r$:
 
     $$ L = \tfrac12 m\dot{\mathbf r}^2 - e(\phi - \mathbf A\cdot\dot{\mathbf r})
@@ -243,7 +267,7 @@ class ChargeInUniformFields(AbstractScene):
     initial_velocity: jax.Array
 
     default_t1: ClassVar[float] = 3 * 2 * jnp.pi
-    default_dt: ClassVar[float] = 2 * jnp.pi / 64
+    default_dt: ClassVar[float] = 3 * 2 * jnp.pi / 400  # 401 saved points on steps
     state_kind: ClassVar[str] = "velocity"
 
     def __init__(
@@ -260,8 +284,8 @@ class ChargeInUniformFields(AbstractScene):
         self.electric_field = jnp.asarray(electric_field, dtype=float)
         self.initial_velocity = jnp.asarray(initial_velocity, dtype=float)
 
-    def system(self) -> lj.Lagrangian:
-        return lj.Lagrangian(_charge_lagrangian, quadratic_in_velocity=True)
+    def system(self) -> Lagrangian:
+        return Lagrangian(_charge_lagrangian, quadratic_in_velocity=True)
 
     def initial_state(self) -> tuple[jax.Array, jax.Array]:
         return jnp.zeros_like(self.initial_velocity), self.initial_velocity
@@ -289,11 +313,8 @@ class ChargeInUniformFields(AbstractScene):
 
     def parallel_acceleration(self) -> jax.Array:
         """a_∥ = e (E·b̂)/m along b̂."""
-        return (
-            self.charge
-            * jnp.dot(self.electric_field, self.field_direction())
-            / self.mass
-        )
+        electric_along_field = jnp.dot(self.electric_field, self.field_direction())
+        return self.charge * electric_along_field / self.mass
 
     def gyration_velocity(self) -> jax.Array:
         """u₀ = v₀⊥ − v_E: the initial velocity in the frame of the guiding centre."""
@@ -329,64 +350,45 @@ class ChargeInUniformFields(AbstractScene):
         )
         return position, velocity
 
-    def sample_times(self, periods: int, samples_per_period: int = 16) -> jax.Array:
-        """Uniform times over whole cyclotron periods, 0 to `periods`·T_c: save at these
-        for `checks` (at least 3 samples per period)."""
-        steps = jnp.arange(periods * samples_per_period + 1)
-        return steps * (self.cyclotron_period() / samples_per_period)
-
     def checks(self, trajectory) -> dict[str, tuple[jax.Array, jax.Array]]:
-        """The exact position and energy, and ω_c, ρ and v_E measured from the samples.
+        """The exact position and energy; v_E, Ω and ρ measured from the samples.
 
-        Needs a run from `initial_state()` saved at `sample_times(periods, n)`. The
-        drift is the guiding centre's displacement over those whole periods (the
-        displacement of the particle, ⊥ B, since its gyration phase is back where it
-        started) over the time; the signed gyrofrequency is minus the accumulated turn
-        of the velocity about b̂ in the drift frame, over the time; the Larmor radius
-        is the distance of each sample, in the drift frame, from the samples' mean
-        (the guiding centre, because they cover whole periods uniformly).
+        Needs a run from `initial_state()` saved at three or more times less than
+        half a cyclotron period apart (and a non-zero gyration, u₀ ≠ 0). In the plane
+        ⊥ B the velocity runs on a circle (the hodograph) about v_E: its fitted
+        centre is the measured drift, and its turn about that centre over the elapsed
+        time is minus the measured Ω. In the frame moving with the measured drift the
+        positions run on a circle, whose fitted radius is the measured Larmor radius.
         """
-        ts = self._require_whole_periods(trajectory.ts)
-        positions, velocities = trajectory.q, trajectory.qdot
-        direction = self.field_direction()
+        ts = self._require_dense_samples(trajectory.ts)
+        plane = _plane_basis(self.field_direction())
+        velocities = trajectory.qdot @ plane.T
+        drift, _ = _fit_circle(velocities)
+        turn = _accumulated_turn(velocities - drift)
         elapsed = ts[-1] - ts[0]
-        drift = _perpendicular(positions[-1] - positions[0], direction) / elapsed
-        gyration = _perpendicular(velocities, direction) - drift
-        turn = jnp.sum(_rotation_angle_about(direction, gyration[:-1], gyration[1:]))
-        # The last sample repeats the first one's phase; leave it out of the mean.
-        in_drift_frame = (
-            _perpendicular(positions[:-1], direction) - ts[:-1, None] * drift
-        )
-        radii = jnp.linalg.norm(
-            in_drift_frame - jnp.mean(in_drift_frame, axis=0), axis=-1
-        )
-        ones = jnp.ones_like(ts)
+        _, radius = _fit_circle(trajectory.q @ plane.T - ts[:, None] * drift)
         initial_energy = 0.5 * self.mass * jnp.sum(self.initial_velocity**2)
         return {
-            "position": (positions, self.orbit_state(ts)[0]),
-            "drift velocity": (drift, self.drift_velocity()),
+            "position": (trajectory.q, self.orbit_state(ts)[0]),
+            "drift velocity": (drift @ plane, self.drift_velocity()),
             "signed gyrofrequency": (-turn / elapsed, self.signed_gyrofrequency()),
-            "Larmor radius": (radii, self.larmor_radius() * ones[:-1]),
-            "energy": (trajectory.energy(), initial_energy * ones),
+            "Larmor radius": (radius, self.larmor_radius()),
+            "energy": (trajectory.energy(), initial_energy * jnp.ones_like(ts)),
         }
 
-    def _require_whole_periods(self, ts: jax.Array) -> jax.Array:
-        """`ts`, with a run-time error unless it is uniform over whole periods."""
-        if ts.shape[-1] < 4:
+    def _require_dense_samples(self, ts: jax.Array) -> jax.Array:
+        """`ts`, with a run-time error if samples are half a period or more apart."""
+        if ts.shape[-1] < 3:
             raise ValueError(
-                "ChargeInUniformFields.checks needs the trajectory saved at "
-                f"sample_times(periods, n); got {ts.shape[-1]} saved times"
+                "ChargeInUniformFields.checks measures circles: save the trajectory "
+                f"at three or more times (ts=...), got {ts.shape[-1]}"
             )
-        spacing = jnp.diff(ts)
-        periods = (ts[-1] - ts[0]) / self.cyclotron_period()
-        uneven = jnp.ptp(spacing) > 1e-9 * spacing[0]
-        too_sparse = spacing[0] > self.cyclotron_period() / 3
-        not_whole = (periods < 0.5) | (jnp.abs(periods - jnp.round(periods)) > 1e-6)
+        widest = jnp.max(jnp.abs(jnp.diff(ts)))
         return eqx.error_if(
             ts,
-            uneven | too_sparse | not_whole,
-            "ChargeInUniformFields.checks needs samples uniform over whole cyclotron "
-            "periods, at least 3 per period: save at sample_times(periods, n)",
+            widest >= 0.5 * self.cyclotron_period(),
+            "ChargeInUniformFields.checks needs samples less than half a cyclotron "
+            "period apart, or the gyration phase is ambiguous",
         )
 
 
