@@ -226,9 +226,7 @@ def simulate(
             adjoint,
             throw,
         )
-    finite = jnp.all(
-        jnp.stack([jnp.all(jnp.isfinite(x)) for x in jax.tree_util.tree_leaves(ys)])
-    )
+    finite = _all_saved_states_finite(saved_ts, ys)
     if throw:
         ys = eqx.error_if(ys, ~finite, _NON_FINITE_MESSAGE)
     stats["finite"] = finite
@@ -241,6 +239,21 @@ def simulate(
         result=result,
         solver_name=type(solver).__name__,
     )
+
+
+def _all_saved_states_finite(saved_ts: jax.Array, ys: Any) -> jax.Array:
+    """Whether every saved state is finite.
+
+    diffrax fills the unused slots of `SaveAt(steps=True)` with t = inf and inf
+    states; those are not results and are skipped.
+    """
+    used = jnp.isfinite(saved_ts)
+
+    def leaf_finite(x):
+        mask = used.reshape(used.shape + (1,) * (jnp.ndim(x) - used.ndim))
+        return jnp.all(jnp.isfinite(x) | ~mask)
+
+    return jnp.all(jnp.stack([leaf_finite(x) for x in jax.tree_util.tree_leaves(ys)]))
 
 
 _NON_FINITE_MESSAGE = (

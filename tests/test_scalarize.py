@@ -27,6 +27,7 @@ def vector_style(q, qd):
         + jnp.where(q[0] > 0, q[1], -q[2])
         + jnp.linalg.norm(stacked)
         + jnp.einsum("ij,ij->", jnp.outer(q, qd), mass)
+        + qd @ jnp.eye(3) @ q
     )
 
 

@@ -206,7 +206,7 @@ def test_failed_implicit_solve_is_reported_on_the_scan_path():
     solver = lj.GaussLegendre(stages=2)  # fixed-point iteration diverges at ωh = 100
     traj = lj.simulate(stiff, (1.0, 0.0), t1=1.0, dt=0.1, solver=solver, throw=False)
     assert traj.result != diffrax.RESULTS.successful
-    with pytest.raises(Exception, match="nonlinear solver|non-finite"):
+    with pytest.raises(Exception, match=r"nonlinear solver|non-finite"):
         lj.simulate(stiff, (1.0, 0.0), t1=1.0, dt=0.1, solver=solver)
 
 
@@ -217,3 +217,20 @@ def test_progress_meter_runs_and_reports(capfd):
     jax.block_until_ready(traj.q)
     assert "100.00%" in capfd.readouterr().out
     assert np.isclose(traj.q[-1], np.cos(OMEGA), atol=1e-8)
+
+
+def test_save_at_every_step_is_not_mistaken_for_a_failure():
+    # diffrax pads SaveAt(steps=True) with inf; those slots are not results.
+    traj = lj.simulate(
+        oscillator_lagrangian(),
+        (1.0, 0.0),
+        t1=1.0,
+        args=OMEGA,
+        solver=diffrax.Tsit5(),
+        saveat=diffrax.SaveAt(steps=True),
+    )
+    used = np.isfinite(np.asarray(traj.ts))
+    assert used.sum() == int(traj.stats["num_accepted_steps"])
+    assert np.allclose(
+        np.asarray(traj.q)[used], np.cos(OMEGA * np.asarray(traj.ts)[used]), atol=1e-6
+    )

@@ -112,6 +112,8 @@ _STRUCTURAL = frozenset(
     ]
 )
 _CALLS = frozenset({"pjit", "jit", "closed_call"})
+# Primitives without operands that produce a constant array (jnp.eye, jnp.arange).
+_CONSTANTS = frozenset({"iota"})
 
 
 class _Unsupported(Exception):
@@ -123,7 +125,7 @@ def _check(jaxpr: Any) -> None:
         name = eqn.primitive.name
         if name in _CALLS:
             _check(eqn.params["jaxpr"].jaxpr)
-        elif name not in _ELEMENTWISE and name not in _STRUCTURAL:
+        elif name not in _ELEMENTWISE | _STRUCTURAL | _CONSTANTS:
             raise _Unsupported(name)
         for var in (*eqn.invars, *eqn.outvars):
             if math.prod(getattr(var.aval, "shape", ())) > MAX_SCALARIZED_SIZE:
@@ -247,6 +249,10 @@ def _evaluate(jaxpr: Any, consts: Sequence[Any], inputs: Sequence[np.ndarray]) -
             results = _evaluate(closed.jaxpr, closed.consts, operands)
         elif name in _ELEMENTWISE:
             results = [_elementwise(eqn, operands)]
+        elif name in _CONSTANTS:
+            # Evaluated now, even inside jit: the value depends on no input.
+            with jax.ensure_compile_time_eval():
+                results = [_to_objects(np.asarray(eqn.primitive.bind(**eqn.params)))]
         else:
             results = _structural(eqn, operands)
             results = results if name == "split" else [results]

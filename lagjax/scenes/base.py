@@ -24,9 +24,19 @@ from typing import Any, ClassVar
 
 import equinox as eqx
 import jax
+import jax.numpy as jnp
 
 from lagjax.mechanics.hamiltonian import AbstractHamiltonian
 from lagjax.mechanics.lagrangian import Lagrangian
+
+
+def parameter(default: float | Any) -> Any:
+    """A physical parameter field: a float array (vmappable, differentiable).
+
+    Stored with an explicit float dtype: weakly typed scalars would make scenes
+    built from Python numbers and from arrays compile separately.
+    """
+    return eqx.field(default=default, converter=lambda x: jnp.asarray(x, dtype=float))
 
 
 class AbstractScene(eqx.Module):
