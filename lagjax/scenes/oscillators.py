@@ -1,4 +1,4 @@
-r"""Linear oscillators: the harmonic oscillator in one and n dimensions, damped and driven.
+r"""Linear oscillators: harmonic in one and n dimensions, damped and driven.
 
 Near a stable equilibrium every system is a set of harmonic oscillators (the course
 text §5): a quadratic $L = \tfrac12\dot q^T T\dot q - \tfrac12 q^T V q$ separates into
@@ -77,9 +77,10 @@ def _harmonic_potential(q, t, scene):
 
 
 class HarmonicOscillator(AbstractScene):
-    r"""A mass on a spring: $H = \dfrac{p^2}{2m} + \dfrac{k q^2}{2}$, $\omega = \sqrt{k/m}$.
+    r"""A mass on a spring, in one dimension: exact solution, action–angle variables.
 
-    Exact solution $q = q_0\cos\omega t + \frac{p_0}{m\omega}\sin\omega t$,
+    $H = \dfrac{p^2}{2m} + \dfrac{k q^2}{2}$, $\omega = \sqrt{k/m}$. Exact solution
+    $q = q_0\cos\omega t + \frac{p_0}{m\omega}\sin\omega t$,
     $p = p_0\cos\omega t - m\omega q_0\sin\omega t$. Action–angle variables
     $(J, \varphi)$: $q = \sqrt{2J/m\omega}\,\sin\varphi$,
     $p = \sqrt{2m\omega J}\,\cos\varphi$, so $H = \omega J$, $J = E/\omega$ is
@@ -151,19 +152,19 @@ class HarmonicOscillator(AbstractScene):
         }
 
 
-# --- Harmonic oscillator, n dimensions --------------------------------------------
+# --- Coupled oscillators: n dimensions, stiffness matrix K ----------------------
 
 
-def _nd_kinetic(p, t, scene):
+def _coupled_kinetic(p, t, scene):
     return 0.5 * jnp.sum(p**2 / scene.masses)
 
 
-def _nd_potential(q, t, scene):
+def _coupled_potential(q, t, scene):
     return 0.5 * q @ scene.stiffness @ q
 
 
-class HarmonicOscillatorND(AbstractScene):
-    r"""n masses bound by a symmetric positive definite stiffness matrix $K$:
+class CoupledOscillators(AbstractScene):
+    r"""n masses coupled by a symmetric positive definite stiffness matrix K.
 
     $$ H = \sum_i \frac{p_i^2}{2 m_i} + \tfrac12 q^T K q. $$
 
@@ -208,7 +209,7 @@ class HarmonicOscillatorND(AbstractScene):
             )
 
     def system(self) -> SeparableHamiltonian:
-        return SeparableHamiltonian(_nd_kinetic, _nd_potential)
+        return SeparableHamiltonian(_coupled_kinetic, _coupled_potential)
 
     def initial_state(self) -> tuple[jax.Array, jax.Array]:
         # Every coordinate out by a different amount and moving, so that a
@@ -301,7 +302,8 @@ class DampedDrivenOscillator(AbstractScene):
     $$ A = \frac{F_0/m}{\sqrt{(\omega_0^2 - \Omega^2)^2 + (\gamma\Omega)^2}},\qquad
        \tan\delta = \frac{\gamma\Omega}{\omega_0^2 - \Omega^2}, $$
 
-    reached after the transient $e^{-\gamma t/2}(C_1\cos\omega_d t + C_2\sin\omega_d t)$,
+    reached once the transient
+    $e^{-\gamma t/2}(C_1\cos\omega_d t + C_2\sin\omega_d t)$,
     $\omega_d = \sqrt{\omega_0^2 - \gamma^2/4}$ (underdamped, $\gamma < 2\omega_0$,
     assumed throughout), dies out. Without drive the energy
     $E = \tfrac12 m\dot q^2 + \tfrac12 k q^2$ times $e^{\gamma t}$ is periodic with
@@ -312,7 +314,7 @@ class DampedDrivenOscillator(AbstractScene):
     `drive_amplitude` F₀ (N, 1; 0 for free damped motion), `drive_frequency` Ω
     (rad/s, 1.5). Starts at $q_0 = 1$ m at rest.
 
-    References: Landau & Lifshitz, *Mechanics*, §25–§26; Goldstein, Poole & Safko
+    References: Landau & Lifshitz, *Mechanics*, §22 and §25–§26; Goldstein, Poole & Safko
     §1.5 (Rayleigh's dissipation function).
     """
 
@@ -421,4 +423,4 @@ class DampedDrivenOscillator(AbstractScene):
         }
 
 
-SCENES = (HarmonicOscillator, HarmonicOscillatorND, DampedDrivenOscillator)
+SCENES = (HarmonicOscillator, CoupledOscillators, DampedDrivenOscillator)

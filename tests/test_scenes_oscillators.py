@@ -1,0 +1,146 @@
+"""Linear oscillator scenes against their closed forms (scenes/oscillators.py)."""
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import lagjax as lj
+from lagjax.scenes import chains, oscillators, pendulums
+from lagjax.scenes.oscillators import (
+    CoupledOscillators,
+    DampedDrivenOscillator,
+    HarmonicOscillator,
+)
+
+
+def worst_relative_errors(checks):
+    """{name: max |measured − expected| / max |expected|} over every saved time."""
+    return {
+        name: jnp.max(jnp.abs(measured - expected)) / jnp.max(jnp.abs(expected))
+        for name, (measured, expected) in checks.items()
+    }
+
+
+@eqx.filter_jit
+def run_saved(scene, solver, dt, t1, samples, rtol=1e-8):
+    """A run from the scene's start, saved at `samples` equally spaced times.
+
+    With a fixed step the saved times must fall on steps (the symplectic solvers
+    interpolate linearly between them), so t1/(samples − 1) is a multiple of dt.
+    """
+    ts = jnp.linspace(0.0, t1, samples)
+    return lj.simulate(
+        scene, scene.initial_state(), t1=t1, dt=dt, solver=solver, ts=ts,
+        rtol=rtol, atol=rtol,
+    )  # fmt: skip
+
+
+@eqx.filter_jit
+def checked_run(scene, solver, dt, t1, samples, rtol=1e-8):
+    """`run_saved`, and the worst relative error of each of the scene's checks."""
+    trajectory = run_saved(scene, solver, dt, t1, samples, rtol)
+    return trajectory, worst_relative_errors(scene.checks(trajectory))
+
+
+@eqx.filter_jit
+def autodiff_normal_modes(scene):
+    """lagjax's normal modes of the scene's H, Legendre-transformed, about q = 0."""
+    q_eq = jnp.zeros_like(scene.initial_state()[0])
+    return lj.normal_modes(scene.system().to_lagrangian(), q_eq, scene)
+
+
+@pytest.mark.parametrize(
+    "scene_class", oscillators.SCENES + pendulums.SCENES + chains.SCENES
+)
+def test_scene_convention(scene_class):
+    scene = scene_class()
+    system = scene.system()
+    if scene.state_kind == "momentum":
+        assert isinstance(system, lj.SeparableHamiltonian)
+    else:
+        assert isinstance(system, lj.Lagrangian) and system.quadratic_in_velocity
+    value = system(*scene.initial_state(), 0.0, scene)
+    assert value.shape == () and np.isfinite(value)
+    assert 0 < scene.default_dt < scene.default_t1
+    # Parameters are array leaves: a batch of scenes is a vmappable pytree.
+    pair = jax.tree_util.tree_map(lambda x: jnp.stack([x, x]), scene)
+    values = jax.vmap(lambda s: s.system()(*s.initial_state(), 0.0, s))(pair)
+    assert np.allclose(values, value, rtol=1e-14, atol=0)
+
+
+def test_harmonic_oscillator_exact_solution_and_action_angle_over_a_sweep():
+    # A vmapped sweep over stiffness: each scene's run against its own closed form.
+    # Yoshida6 at ωh ≤ 0.03 over ≤ 10 periods: phase error ~ (ωh)⁶ωt ≈ 1e-9.
+    stiffnesses = jnp.array([1.0, 4.0, 9.0])
+    scenes = jax.vmap(lambda k: HarmonicOscillator(stiffness=k))(stiffnesses)
+
+    trajectories, worst = eqx.filter_vmap(
+        lambda scene: checked_run(scene, lj.Yoshida6(), 0.01, 10.0, 1001)
+    )(scenes)
+    assert set(worst) == {"q(t)", "p(t)", "action J", "angle advance φ(t) − φ(0)"}
+    for name, error in worst.items():
+        assert np.all(error < 1e-8), (name, error)
+    # The angle really advances at ω: over 10 s the ω = 3 scene turns 30 rad.
+    scene = HarmonicOscillator(stiffness=9.0)
+    q0, p0 = scene.initial_state()
+    q1, p1 = trajectories.q[2, -1], trajectories.p[2, -1]
+    turned = np.mod(scene.angle(q1, p1) - scene.angle(q0, p0), 2 * np.pi)
+    assert np.isclose(turned, np.mod(30.0, 2 * np.pi), rtol=1e-9, atol=0)
+
+
+def test_coupled_oscillators_general_and_diagonal_stiffness():
+    general = CoupledOscillators()
+    diagonal = CoupledOscillators(stiffness=(1.0, 4.0, 9.0))
+    for scene in (general, diagonal):
+        _, worst = checked_run(scene, lj.Yoshida6(), 0.005, 20.0, 2001)
+        for name, error in worst.items():
+            assert error < 1e-8, (name, error)
+        # The closed form against lagjax's autodiff normal modes of the same H.
+        omegas, modes = autodiff_normal_modes(scene)
+        assert np.allclose(omegas, scene.normal_mode_frequencies(), rtol=1e-12, atol=0)
+        overlap = np.abs(modes.T @ np.diag(scene.masses) @ scene.normal_modes())
+        assert np.allclose(overlap, np.eye(3), rtol=0, atol=1e-10)
+    expected = np.sort(np.sqrt(np.array([1.0, 4.0, 9.0]) / np.array(diagonal.masses)))
+    assert np.allclose(diagonal.normal_mode_frequencies(), expected, rtol=1e-14, atol=0)
+
+
+def test_coupled_oscillators_reject_mismatched_stiffness():
+    with pytest.raises(ValueError, match="stiffness must be"):
+        CoupledOscillators(masses=(1.0, 2.0), stiffness=np.eye(3))
+
+
+def test_driven_oscillator_transient_and_steady_state():
+    # Adaptive Dopri8 at rtol = 1e-12 over 60 s = 14 drive periods; the response
+    # is fitted after the transient has decayed by e^{-20}. t1 is traced so that
+    # the next test reuses the compiled run.
+    scene = DampedDrivenOscillator()
+    trajectory, worst = checked_run(
+        scene, diffrax.Dopri8(), None, jnp.asarray(60.0), 1201, 1e-12
+    )
+    for name, error in worst.items():
+        assert error < 1e-8, (name, error)
+    # The response itself: Ω = 1.5 below resonance ω₀ = 2, so q lags by δ < π/2.
+    amplitude, lag = scene.measured_response(trajectory)
+    assert np.isclose(amplitude, 1 / np.hypot(4 - 1.5**2, 1.5), rtol=1e-8, atol=0)
+    assert np.isclose(lag, np.arctan2(1.5, 4 - 1.5**2), rtol=1e-8, atol=0)
+
+
+def test_light_damping_energy_decays_as_exp_minus_gamma_t():
+    # Free motion, γ = 0.05 ≪ ω₀ = 2. E e^{γt} has period π/ω_d, so between t = 0
+    # and 40 half-periods the average decay rate is exactly γ.
+    scene = DampedDrivenOscillator(damping=0.05, drive_amplitude=0.0)
+    t1 = 40 * np.pi / scene.damped_frequency()
+    # t1 traced: the same compiled run as the driven test.
+    trajectory, _ = checked_run(scene, diffrax.Dopri8(), None, t1, 1201, 1e-12)
+    energy = trajectory.energy()
+    rate = np.log(energy[0] / energy[-1]) / t1
+    assert np.isclose(rate, 0.05, rtol=1e-8, atol=0)
+    measured, expected = scene.checks(trajectory)["energy decay rate"]
+    assert np.isclose(measured, expected, rtol=1e-8, atol=0)
+    assert np.isclose(expected, 0.05, rtol=1e-12, atol=0)
+    # Within a half-period E is not a pure exponential: it wiggles about it.
+    wiggle = energy * np.exp(0.05 * trajectory.ts) / energy[0]
+    assert 1e-3 < np.ptp(wiggle) < 0.1
