@@ -15,3 +15,15 @@ def tree_allclose(x, y, *, rtol=1e-10, atol=1e-10) -> bool:
         jnp.shape(a) == jnp.shape(b) and np.allclose(a, b, rtol=rtol, atol=atol)
         for a, b in zip(x_leaves, y_leaves)
     )
+
+
+def relative_close(actual, expected, rtol: float) -> bool:
+    """max|actual − expected| ≤ rtol · max|expected|: relative to the quantity's scale.
+
+    Unlike `np.allclose(..., rtol=...)`, no default absolute tolerance (1e-8) can
+    hide a failure of a tight relative bound, and components that are zero in the
+    closed form do not demand an impossible elementwise relative accuracy.
+    """
+    actual, expected = np.asarray(actual), np.asarray(expected)
+    scale = max(float(np.max(np.abs(expected))), np.finfo(float).tiny)
+    return float(np.max(np.abs(actual - expected))) <= rtol * scale

@@ -6,6 +6,7 @@ import numpy as np
 
 import lagjax as lj
 from lagjax.scenes.base import AbstractScene
+from tests.helpers import relative_close
 
 
 def _oscillator_potential(q, t, scene):
@@ -43,7 +44,8 @@ def test_scene_runs_and_checks():
     traj = lj.simulate(scene, scene.initial_state(), t1=1.0, dt=0.001)
     measured, expected = scene.checks(traj)["q(t1)"]
     assert np.isclose(measured, expected, atol=1e-10)
-    assert np.isclose(traj.energy()[-1], 2.0, rtol=1e-12)
+    # Yoshida4 keeps H to O((ωh)⁴) ≈ 1.6e-11 at ωh = 0.002 (2.0e-12 measured).
+    assert relative_close(traj.energy()[-1], 2.0, 1e-10)
 
 
 def test_vmap_over_scenes_is_a_parameter_sweep():
