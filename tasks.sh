@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # One entry point for the README's commands:
-#   bash tasks.sh demo    set up (first time) and run the main job
+#   bash tasks.sh demo    set up (first time) and run the main job: the double-pendulum
+#                         derivation demo, then `lagjax run foucault-pendulum`
 #   bash tasks.sh test    set up (first time) and run the test suite
 #   bash tasks.sh bench   set up with the benchmark extras and run the benchmarks
 # Set-up creates ./.venv with the package installed in editable mode; it is
@@ -25,7 +26,10 @@ setup() {
 cmd=${1:-}
 shift || true
 case "$cmd" in
-    demo) setup test; exec "$VENV/bin/python" -m lagjax.demo "$@" ;;
+    demo)
+        setup test
+        "$VENV/bin/python" -m lagjax.demo
+        exec "$VENV/bin/lagjax" run foucault-pendulum "$@" ;;
     test) setup test; exec "$VENV/bin/python" -m pytest "$@" ;;
     bench) setup "test,bench"; exec "$VENV/bin/python" benchmarks/derivation_overhead.py "$@" ;;
     *) echo "usage: bash tasks.sh {demo|test|bench} [args...]" >&2; exit 2 ;;
