@@ -5,6 +5,7 @@ derives the equations of motion, Legendre transforms, Poisson brackets and norma
 modes by automatic differentiation.
 """
 
+from . import rigid as rigid
 from . import scenes as scenes
 from .mechanics.brackets import poisson_bracket as poisson_bracket
 from .mechanics.canonical import GeneratingFunction as GeneratingFunction
@@ -22,9 +23,14 @@ from .mechanics.lagrangian import Lagrangian as Lagrangian
 from .mechanics.modes import equilibrium as equilibrium
 from .mechanics.modes import normal_modes as normal_modes
 from .mechanics.modes import stiffness_matrices as stiffness_matrices
+from .rigid.body import RigidBody as RigidBody
+from .rigid.term import RigidBodyTerm as RigidBodyTerm
 from .simulate import simulate as simulate
 from .solvers.implicit import GaussLegendre as GaussLegendre
 from .solvers.implicit import ImplicitMidpoint as ImplicitMidpoint
+from .solvers.rigid import QuaternionProjection as QuaternionProjection
+from .solvers.rigid import RigidBodyVerlet as RigidBodyVerlet
+from .solvers.rigid import RigidBodyYoshida4 as RigidBodyYoshida4
 from .solvers.splitting import BlanesMoan4 as BlanesMoan4
 from .solvers.splitting import KahanLi8 as KahanLi8
 from .solvers.splitting import SofSpa10 as SofSpa10

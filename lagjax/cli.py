@@ -30,6 +30,7 @@ from jax.flatten_util import ravel_pytree  # noqa: E402
 from . import scenes as scene_catalog  # noqa: E402
 from .simulate import simulate  # noqa: E402
 from .solvers.implicit import GaussLegendre, ImplicitMidpoint  # noqa: E402
+from .solvers.rigid import RigidBodyVerlet, RigidBodyYoshida4  # noqa: E402
 from .solvers.splitting import (  # noqa: E402
     BlanesMoan4,
     KahanLi8,
@@ -56,6 +57,8 @@ SOLVERS: dict[str, Callable[[], diffrax.AbstractSolver]] = {
     "Dopri5": diffrax.Dopri5,
     "Dopri8": diffrax.Dopri8,
     "Kvaerno5": diffrax.Kvaerno5,
+    "RigidBodyVerlet": RigidBodyVerlet,
+    "RigidBodyYoshida4": RigidBodyYoshida4,
 }
 SAVED_POINTS = 401
 PROGRESS_STEPS = 200_000
@@ -142,7 +145,9 @@ def _save_times(t1: float, dt: float | None) -> jax.Array:
 def _run(scene, t1: float, dt: float | None, solver, batch: int | None):
     ts = _save_times(t1, dt)
     steps = abs(t1 / dt) if dt else 0
-    kwargs = dict(t1=t1, dt=dt, solver=solver, ts=ts, progress=steps > PROGRESS_STEPS)
+    kwargs: dict[str, Any] = dict(
+        t1=t1, dt=dt, solver=solver, ts=ts, progress=steps > PROGRESS_STEPS
+    )
     if dt is not None:
         kwargs["max_steps"] = int(steps) + 2
 
@@ -169,7 +174,7 @@ def _summary(scene, name, trajectory, compile_time, run_time, batch) -> list[str
     energy = np.asarray(first.energy())
     scale = max(abs(energy[0]), 1e-300)
     lines = [
-        f"scene     {name}: {type(scene).__doc__.strip().splitlines()[0]}",
+        f"scene     {name}: {(type(scene).__doc__ or '').strip().splitlines()[0]}",
         f"solver    {first.stats['solver']}, {int(first.stats['num_steps'])} steps"
         + ("" if batch is None else f", batch of {batch}"),
         f"time      run {run_time:.3f} s (excluding compile), compile {compile_time:.2f} s",
@@ -230,7 +235,7 @@ def _save(path: str, trajectory) -> None:
     arrays.update({f"q{i}": np.asarray(x) for i, x in enumerate(q_leaves)})
     label = "p" if trajectory.is_hamiltonian else "qdot"
     arrays.update({f"{label}{i}": np.asarray(x) for i, x in enumerate(second)})
-    np.savez(path, **arrays)
+    np.savez(path, **arrays)  # pyright: ignore[reportArgumentType]
 
 
 def _command_run(args) -> int:
@@ -257,7 +262,7 @@ def _command_run(args) -> int:
 
 def _command_scenes(_args) -> int:
     for name, scene_class in scene_catalog.catalog().items():
-        print(f"{name:24s} {scene_class.__doc__.strip().splitlines()[0]}")
+        print(f"{name:24s} {(scene_class.__doc__ or '').strip().splitlines()[0]}")
     return 0
 
 

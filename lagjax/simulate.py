@@ -9,6 +9,7 @@ One entry point for every system and solver:
 | `Lagrangian` | `VariationalMidpoint` | (q, p), discrete Euler–Lagrange equations of L |
 | any Hamiltonian | non-partitioned | (q, p), one `ODETerm` with Hamilton's equations |
 | `SeparableHamiltonian` | partitioned (StormerVerlet, Yoshida4, …) | (q, p), terms (∂T/∂p, −∂V/∂q) |
+| `RigidBody` | rigid-body splittings, or any solver | (unit quaternion, body angular momentum), `RigidBodyTerm` |
 
 A solver is *partitioned* when its diffrax `term_structure` is a pair of terms
 (lagjax's splitting methods and diffrax's `SemiImplicitEuler`). With `dt` the steps are
@@ -32,13 +33,16 @@ import jax.numpy as jnp
 from .fixed_step import integrate_fixed_steps
 from .mechanics.hamiltonian import AbstractHamiltonian, SeparableHamiltonian
 from .mechanics.lagrangian import Lagrangian
+from .rigid.body import RigidBody
+from .rigid.term import RigidBodyTerm
 from .scenes.base import AbstractScene
 from .solvers.implicit import AbstractGaussLegendre
+from .solvers.rigid import QuaternionProjection, RigidBodyYoshida4
 from .solvers.splitting import Yoshida4
 from .solvers.variational import LagrangianTerm
 from .trajectory import Trajectory
 
-MechanicalSystem = Lagrangian | AbstractHamiltonian
+MechanicalSystem = Lagrangian | AbstractHamiltonian | RigidBody
 System = MechanicalSystem | AbstractScene
 
 
@@ -52,11 +56,19 @@ def default_solver(system: MechanicalSystem, dt: Any) -> diffrax.AbstractSolver:
     """Pick a solver from the system's structure (recorded in `Trajectory.stats`).
 
     Fixed step (`dt` given): a separable Hamiltonian gets `Yoshida4` (explicit,
-    symplectic, order 4); anything else `GaussLegendre(stages=2)` (implicit,
-    symplectic, order 4). Adaptive (`dt` None): `Tsit5` with error control.
+    symplectic, order 4); a `RigidBody` `RigidBodyYoshida4` (Lie–Poisson splitting);
+    anything else `GaussLegendre(stages=2)` (implicit, symplectic, order 4).
+    Adaptive (`dt` None): `Tsit5` with error control (on a rigid body with the
+    quaternion projected back to unit length).
     """
     from .solvers.implicit import GaussLegendre
 
+    if isinstance(system, RigidBody):
+        return (
+            RigidBodyYoshida4()
+            if dt is not None
+            else QuaternionProjection(diffrax.Tsit5())
+        )
     if dt is None:
         return diffrax.Tsit5()
     if isinstance(system, SeparableHamiltonian):
@@ -66,6 +78,8 @@ def default_solver(system: MechanicalSystem, dt: Any) -> diffrax.AbstractSolver:
 
 def _terms_and_state(system: MechanicalSystem, solver, y0, t0, args):
     """diffrax terms, initial state and the system that state belongs to."""
+    if isinstance(system, RigidBody):
+        return RigidBodyTerm(system), y0, system
     if solver.term_structure is LagrangianTerm:
         if not isinstance(system, Lagrangian):
             raise ValueError(

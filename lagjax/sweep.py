@@ -59,7 +59,7 @@ def sweep(
     args_batch: Any = None,
     *,
     chunk_size: int | None = None,
-    devices: Sequence[jax.Device] | None = None,
+    devices: Sequence[Any] | None = None,
     **simulate_kwargs: Any,
 ) -> Trajectory:
     """`simulate` for every member of a batch, sharded over `devices`.

@@ -16,10 +16,14 @@ import jax.numpy as jnp
 
 from .mechanics.hamiltonian import AbstractHamiltonian
 from .mechanics.lagrangian import Lagrangian
+from .rigid.body import RigidBody
 
 
 class Trajectory(eqx.Module):
     """Saved times `ts` and states `ys = (q, q̇ or p)`; arrays have a leading time axis.
+
+    For a `RigidBody`, q is the unit quaternion, p the body angular momentum and q̇
+    the quaternion's rate.
 
     `stats` holds the solver used, diffrax's step counts and whether the state stayed
     finite; `result` is diffrax's `RESULTS` value (successful or why not).
@@ -27,7 +31,7 @@ class Trajectory(eqx.Module):
 
     ts: jax.Array
     ys: tuple[Any, Any]
-    system: Lagrangian | AbstractHamiltonian
+    system: Lagrangian | AbstractHamiltonian | RigidBody
     args: Any
     run_stats: dict[str, Any]
     result: diffrax.RESULTS
@@ -39,7 +43,8 @@ class Trajectory(eqx.Module):
 
     @property
     def is_hamiltonian(self) -> bool:
-        return isinstance(self.system, AbstractHamiltonian)
+        """True when the second state component is a momentum (not q̇)."""
+        return not isinstance(self.system, Lagrangian)
 
     @property
     def q(self) -> Any:
@@ -62,9 +67,9 @@ class Trajectory(eqx.Module):
 
     @property
     def qdot(self) -> Any:
-        if isinstance(self.system, AbstractHamiltonian):
-            return self._along(self.system.velocity)
-        return self.ys[1]
+        if isinstance(self.system, Lagrangian):
+            return self.ys[1]
+        return self._along(self.system.velocity)
 
     @property
     def p(self) -> Any:

@@ -21,8 +21,6 @@ from lagjax.rigid import (
     quaternion_to_matrix,
 )
 from lagjax.rigid.free_body import (
-    complete_elliptic_k,
-    complete_elliptic_k_from_complement,
     free_body_period,
     invariable_plane_distance,
     space_precession_rate,
@@ -33,6 +31,7 @@ from lagjax.solvers.rigid import (
     RigidBodyVerlet,
     RigidBodyYoshida4,
 )
+from lagjax.special import complete_elliptic_k, complete_elliptic_k_from_complement
 
 SAMPLES = 2001
 Q0 = axis_angle_quaternion(jnp.array([0.6, 0.0, 0.8]), 0.7)

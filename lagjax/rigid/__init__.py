@@ -2,8 +2,12 @@
 
 - `inertia`, `solids`: inertia tensors, the axis theorems, principal axes.
 - `euler_angles`, `quaternion`: orientations and angular velocities.
+- `body`, `term`: `RigidBody` (Euler's equations on quaternions) and its diffrax term;
+  the structure-preserving solvers are in `lagjax.solvers.rigid`.
+- `free_body`, `heavy_top`: closed forms (precession, periods, nutation bounds).
 """
 
+from .body import RigidBody as RigidBody
 from .euler_angles import (
     euler_zxz_body_angular_velocity as euler_zxz_body_angular_velocity,
 )
@@ -14,6 +18,14 @@ from .euler_angles import (
 from .euler_angles import euler_zxz_to_quaternion as euler_zxz_to_quaternion
 from .euler_angles import euler_zxz_to_rotation as euler_zxz_to_rotation
 from .euler_angles import rotation_to_euler_zxz as rotation_to_euler_zxz
+from .free_body import free_body_period as free_body_period
+from .free_body import invariable_plane_distance as invariable_plane_distance
+from .free_body import space_precession_rate as space_precession_rate
+from .free_body import symmetric_precession_rate as symmetric_precession_rate
+from .heavy_top import gyroscopic_precession_rates as gyroscopic_precession_rates
+from .heavy_top import nutation_bounds as nutation_bounds
+from .heavy_top import steady_precession_rates as steady_precession_rates
+from .heavy_top import turning_point_cubic as turning_point_cubic
 from .inertia import TopKind as TopKind
 from .inertia import centre_of_mass as centre_of_mass
 from .inertia import parallel_axis as parallel_axis
@@ -40,3 +52,4 @@ from .solids import solid_sphere_inertia as solid_sphere_inertia
 from .solids import spherical_shell_inertia as spherical_shell_inertia
 from .solids import thin_disc_inertia as thin_disc_inertia
 from .solids import thin_rod_inertia as thin_rod_inertia
+from .term import RigidBodyTerm as RigidBodyTerm

@@ -64,6 +64,12 @@ class RigidBody(eqx.Module):
 
     def __init__(self, moments: Any, potential: Callable | None = None):
         moments = jnp.asarray(moments, dtype=float)
+        if moments.shape != (3,):
+            raise ValueError(
+                "RigidBody needs the three principal moments (shape (3,)), got shape "
+                f"{moments.shape}; diagonalise a full tensor with principal_axes"
+            )
+        # A run-time check, so it also holds for traced (vmapped, jitted) moments.
         self.moments = eqx.error_if(
             moments, jnp.any(moments <= 0), "principal moments must be positive"
         )
@@ -71,15 +77,10 @@ class RigidBody(eqx.Module):
         self.potential_arity = (
             0
             if potential is None
-            else positional_arity(potential, minimum=1, maximum=3, what="the potential V")
-        )
-
-    def __check_init__(self):
-        if self.moments.shape != (3,):
-            raise ValueError(
-                "RigidBody needs the three principal moments (shape (3,)), got shape "
-                f"{self.moments.shape}; diagonalise a full tensor with principal_axes"
+            else positional_arity(
+                potential, minimum=1, maximum=3, what="the potential V"
             )
+        )
 
     def angular_velocity(self, body_momentum: jax.Array) -> jax.Array:
         r"""$\boldsymbol\omega = \mathbf I^{-1}\boldsymbol\Pi$ in body components."""
@@ -104,36 +105,58 @@ class RigidBody(eqx.Module):
         return check_scalar(value, "the potential V")
 
     def __call__(
-        self, quaternion: jax.Array, body_momentum: jax.Array, t: Any = 0.0, args: Any = None
+        self,
+        quaternion: jax.Array,
+        body_momentum: jax.Array,
+        t: Any = 0.0,
+        args: Any = None,
     ) -> jax.Array:
         """The energy T + V."""
-        return self.kinetic_energy(body_momentum) + self.potential_energy(quaternion, t, args)
+        return self.kinetic_energy(body_momentum) + self.potential_energy(
+            quaternion, t, args
+        )
 
     def energy(
-        self, quaternion: jax.Array, body_momentum: jax.Array, t: Any = 0.0, args: Any = None
+        self,
+        quaternion: jax.Array,
+        body_momentum: jax.Array,
+        t: Any = 0.0,
+        args: Any = None,
     ) -> jax.Array:
         """The energy T + V (the same as calling the body)."""
         return self(quaternion, body_momentum, t, args)
 
-    def torque(self, quaternion: jax.Array, t: Any = 0.0, args: Any = None) -> jax.Array:
+    def torque(
+        self, quaternion: jax.Array, t: Any = 0.0, args: Any = None
+    ) -> jax.Array:
         r"""Body-frame torque $-\partial V(R(1 + \hat\epsilon))/\partial\epsilon$ at 0."""
         if self.potential is None:
             return jnp.zeros(3, dtype=self.moments.dtype)
         rotation = quaternion_to_matrix(quaternion)
 
         def turned(angle):
-            return self._potential_of_matrix(rotation @ (jnp.eye(3) + skew(angle)), t, args)
+            return self._potential_of_matrix(
+                rotation @ (jnp.eye(3) + skew(angle)), t, args
+            )
 
         return -jax.grad(turned)(jnp.zeros(3, dtype=rotation.dtype))
 
     def velocity(
-        self, quaternion: jax.Array, body_momentum: jax.Array, t: Any = 0.0, args: Any = None
+        self,
+        quaternion: jax.Array,
+        body_momentum: jax.Array,
+        t: Any = 0.0,
+        args: Any = None,
     ) -> jax.Array:
         r"""$\dot q = \tfrac12 q \otimes (0, \boldsymbol\omega)$."""
         return quaternion_rate(quaternion, self.angular_velocity(body_momentum))
 
     def vector_field(
-        self, quaternion: jax.Array, body_momentum: jax.Array, t: Any = 0.0, args: Any = None
+        self,
+        quaternion: jax.Array,
+        body_momentum: jax.Array,
+        t: Any = 0.0,
+        args: Any = None,
     ) -> tuple[jax.Array, jax.Array]:
         r"""$(\dot q, \dot{\boldsymbol\Pi})$: the orientation rate and Euler's
         equations."""
@@ -155,7 +178,7 @@ class RigidBody(eqx.Module):
         r"""$\boldsymbol\omega$ in space components, $R(q)\,\mathbf I^{-1}\boldsymbol\Pi$."""
         return quaternion_to_matrix(quaternion) @ self.angular_velocity(body_momentum)
 
-    def initial_state(
+    def state_from_angular_velocity(
         self, quaternion: jax.Array, omega_body: jax.Array
     ) -> tuple[jax.Array, jax.Array]:
         r"""The state $(q, \mathbf I\boldsymbol\omega)$ from an orientation and a body

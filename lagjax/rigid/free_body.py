@@ -41,28 +41,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-# Enough for float64 from any start: the ratio of the two means falls
-# doubly exponentially once it is O(1), and reaches O(1) within ~10 steps even from
-# a ratio of 1e300.
-_AGM_ITERATIONS = 24
-
-
-def arithmetic_geometric_mean(a: jax.Array, b: jax.Array) -> jax.Array:
-    r"""Gauss's $\mathrm{AGM}(a, b)$: iterate $a, b \to (a + b)/2, \sqrt{ab}$."""
-
-    def iterate(_, means):
-        a, b = means
-        return 0.5 * (a + b), jnp.sqrt(a * b)
-
-    a, b = jnp.broadcast_arrays(jnp.asarray(a, dtype=float), jnp.asarray(b, dtype=float))
-    a, b = jax.lax.fori_loop(0, _AGM_ITERATIONS, iterate, (a, b))
-    return 0.5 * (a + b)
-
-
-def complete_elliptic_k(parameter: jax.Array) -> jax.Array:
-    r"""$K(m) = \int_0^{\pi/2} (1 - m\sin^2\phi)^{-1/2}\,d\phi$ for $0 \le m < 1$."""
-    m = jnp.asarray(parameter, dtype=float)
-    return 0.5 * jnp.pi / arithmetic_geometric_mean(jnp.ones_like(m), jnp.sqrt(1 - m))
+from lagjax.special import complete_elliptic_k_from_complement
 
 
 def symmetric_precession_rate(moments: jax.Array, omega_3: jax.Array) -> jax.Array:
@@ -81,9 +60,10 @@ def free_body_period(
 ) -> jax.Array:
     r"""The period $4K(m)/\nu$ of $\boldsymbol\omega(t)$ in the body frame.
 
-    `moments` are sorted here, so any labelling works; they must be distinct (a
-    symmetric body's period is $2\pi/|\Omega|$ instead). On the separatrix
-    $M^2 = 2EI_2$ the period is infinite.
+    `moments` are sorted here, so any labelling works. For a symmetric body (two
+    equal moments) $m = 0$ and this is $2\pi/|\Omega|$, the precession period; a
+    spherical top has no period (0/0). On the separatrix $M^2 = 2EI_2$ the period
+    is infinite.
     """
     i1, i2, i3 = jnp.sort(jnp.asarray(moments))
     m2, two_e = angular_momentum_squared, 2 * energy
@@ -91,10 +71,13 @@ def free_body_period(
     about_smallest = (i2 - i1) * (two_e * i3 - m2)
     larger = jnp.maximum(about_largest, about_smallest)
     nu = jnp.sqrt(larger / (i1 * i2 * i3))
-    parameter = jnp.minimum(about_largest, about_smallest) / larger
-    return 4 * complete_elliptic_k(parameter) / nu
+    # 1 − m = |A − B| / max(A, B), with A − B = (I3 − I1)(M² − 2E I2).
+    complement = (i3 - i1) * jnp.abs(m2 - two_e * i2) / larger
+    return 4 * complete_elliptic_k_from_complement(complement) / nu
 
 
-def invariable_plane_distance(energy: jax.Array, angular_momentum: jax.Array) -> jax.Array:
+def invariable_plane_distance(
+    energy: jax.Array, angular_momentum: jax.Array
+) -> jax.Array:
     r"""$\sqrt{2T}/|\mathbf L|$: from the fixed point to the invariable plane."""
     return jnp.sqrt(2 * energy) / jnp.linalg.norm(angular_momentum)

@@ -110,6 +110,9 @@ def _three_real_roots(coefficients: jax.Array) -> jax.Array:
 def nutation_bounds(
     i1: jax.Array, i3: jax.Array, mgl: jax.Array, angles: jax.Array, rates: jax.Array
 ) -> tuple[jax.Array, jax.Array]:
-    r"""$(\theta_{\min}, \theta_{\max})$ from the two roots of $f(u)$ in $[-1, 1]$."""
+    r"""$(\theta_{\min}, \theta_{\max})$ from the two roots of $f(u)$ in $[-1, 1]$.
+
+    Needs gravity ($Mgl > 0$: f is then a true cubic with its third root above 1).
+    """
     u1, u2, _ = _three_real_roots(turning_point_cubic(i1, i3, mgl, angles, rates))
     return jnp.arccos(jnp.clip(u2, -1.0, 1.0)), jnp.arccos(jnp.clip(u1, -1.0, 1.0))

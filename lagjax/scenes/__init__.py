@@ -19,9 +19,18 @@ def _command_name(scene_class: type) -> str:
 
 def catalog() -> dict[str, type[AbstractScene]]:
     """{command-line name: scene class} for every scene, in a stable order."""
-    from . import central, chains, earth, fields, oscillators, pendulums, rotating
+    from . import (
+        central,
+        chains,
+        earth,
+        fields,
+        oscillators,
+        pendulums,
+        rigid,
+        rotating,
+    )
 
-    modules = (oscillators, pendulums, chains, earth, rotating, central, fields)
+    modules = (oscillators, pendulums, chains, earth, rotating, central, fields, rigid)
     return {_command_name(cls): cls for module in modules for cls in module.SCENES}
 
 

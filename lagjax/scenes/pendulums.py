@@ -26,66 +26,10 @@ import jax.numpy as jnp
 from lagjax.mechanics.hamiltonian import SeparableHamiltonian
 from lagjax.mechanics.lagrangian import Lagrangian
 from lagjax.scenes.base import AbstractScene
+from lagjax.signals import zero_crossing_times
+from lagjax.special import complete_elliptic_k_from_complement
 
-# The AGM converges quadratically once a and b agree to a digit or two, and from
-# b/a = 1e-300 it takes about ten halvings of the logarithmic gap to get there.
-_AGM_ITERATIONS = 16
-# Newton's method on a cubic from the linear-interpolation guess: quadratic
-# convergence, so a handful of iterations reach round-off.
-_CROSSING_NEWTON_ITERATIONS = 8
 _DEFAULT_AMPLITUDE = math.radians(150)
-
-
-def arithmetic_geometric_mean(a: jax.Array, b: jax.Array) -> jax.Array:
-    """AGM(a, b): iterate a, b ← (a + b)/2, √(ab) to their common limit (a, b > 0)."""
-    a, b = jnp.asarray(a), jnp.asarray(b)
-    for _ in range(_AGM_ITERATIONS):
-        a, b = 0.5 * (a + b), jnp.sqrt(a * b)
-    return a
-
-
-def complete_elliptic_k(modulus: jax.Array) -> jax.Array:
-    r"""$K(k) = \int_0^{\pi/2}\frac{d\phi}{\sqrt{1 - k^2\sin^2\phi}}
-    = \frac{\pi}{2\,\mathrm{AGM}(1, k')}$, $k' = \sqrt{1 - k^2}$.
-
-    $k'$ is formed as $\sqrt{(1-k)(1+k)}$; where it is known directly, as a
-    pendulum's $\cos(\theta_0/2)$, `complete_elliptic_k_of_complement` keeps all
-    its digits as $k \to 1$.
-    """
-    modulus = jnp.asarray(modulus)
-    return complete_elliptic_k_of_complement(jnp.sqrt((1 - modulus) * (1 + modulus)))
-
-
-def complete_elliptic_k_of_complement(complement: jax.Array) -> jax.Array:
-    """K as a function of the complementary modulus k′: π / (2 AGM(1, k′))."""
-    complement = jnp.asarray(complement)
-    return jnp.pi / (
-        2 * arithmetic_geometric_mean(jnp.ones_like(complement), complement)
-    )
-
-
-def zero_crossing_times(
-    ts: jax.Array, x: jax.Array, xdot: jax.Array, count: int
-) -> jax.Array:
-    """The first `count` times at which a sampled x(t) changes sign; NaN if fewer.
-
-    Each crossing is refined by Newton's method on the cubic Hermite interpolant of
-    (x, ẋ) between the samples around it. Its error is O(Δt⁴): samples 0.03 of the
-    motion's time scale apart place a crossing to ~1e-12 of that scale.
-    """
-    changes = jnp.signbit(x[:-1]) != jnp.signbit(x[1:])
-    (index,) = jnp.nonzero(changes, size=count, fill_value=0)
-    step = ts[index + 1] - ts[index]
-    x0, x1 = x[index], x[index + 1]
-    v0, v1 = step * xdot[index], step * xdot[index + 1]
-    # x(s) on s ∈ [0, 1], as polynomial coefficients, highest power first.
-    cubic = [2 * (x0 - x1) + v0 + v1, 3 * (x1 - x0) - 2 * v0 - v1, v0, x0]
-    slope = [3 * cubic[0], 2 * cubic[1], cubic[2]]
-    s = x0 / (x0 - x1)
-    for _ in range(_CROSSING_NEWTON_ITERATIONS):
-        s = s - jnp.polyval(jnp.stack(cubic), s) / jnp.polyval(jnp.stack(slope), s)
-    found = jnp.arange(count) < jnp.sum(changes)
-    return jnp.where(found, ts[index] + s * step, jnp.nan)
 
 
 # --- Simple pendulum at large amplitude -------------------------------------------
@@ -148,7 +92,7 @@ class SimplePendulum(AbstractScene):
 
     def period(self) -> jax.Array:
         """T = 4K(sin(θ₀/2))/ω₀ (s)."""
-        quarter = complete_elliptic_k_of_complement(jnp.cos(self.amplitude / 2))
+        quarter = complete_elliptic_k_from_complement(jnp.cos(self.amplitude / 2) ** 2)
         return 4 * quarter / self.small_amplitude_frequency()
 
     def measured_period(self, trajectory) -> jax.Array:

@@ -19,7 +19,8 @@ Mechanics*, 3rd ed., §5.6–5.7; Landau & Lifshitz, *Mechanics*, §35–37.
 
 from __future__ import annotations
 
-from typing import Any
+import math
+from typing import Any, ClassVar
 
 import jax
 import jax.numpy as jnp
@@ -34,6 +35,7 @@ from lagjax.rigid.euler_angles import (
 from lagjax.rigid.free_body import free_body_period, symmetric_precession_rate
 from lagjax.rigid.heavy_top import nutation_bounds
 from lagjax.rigid.quaternion import quaternion_to_matrix
+from lagjax.signals import zero_crossing_times
 
 from .base import AbstractScene
 
@@ -55,33 +57,62 @@ def _free_body_lagrangian(q, qdot, t, scene):
 
 
 def _body_motion(trajectory: Any, moments: jax.Array) -> tuple[jax.Array, jax.Array]:
-    """(rotation matrices, body angular velocities) along either kind of run."""
-    if trajectory.q.shape[-1] == 4:  # (quaternion, body momentum)
+    """(rotation matrices, body angular velocities) along either kind of run:
+    Euler angles and their rates, or quaternions and body angular momenta."""
+    if trajectory.q.shape[-1] == 4:
         return quaternion_to_matrix(trajectory.q), trajectory.p / moments
     omega = jax.vmap(euler_zxz_body_angular_velocity)(trajectory.q, trajectory.qdot)
     return jax.vmap(euler_zxz_to_rotation)(trajectory.q), omega
 
 
-class TorqueFreeBody(AbstractScene):
-    """A free rigid body: principal moments, a start orientation and spin.
+def _intermediate_axis_half_period(trajectory: Any, moments: jax.Array) -> jax.Array:
+    """Time between the first two sign changes of ω₂ (NaN if fewer than two)."""
+    _, omega = _body_motion(trajectory, moments)
+    # ω̇₂ from Euler's equations, for the cubic Hermite refinement of each crossing.
+    omega_2_rate = (moments[2] - moments[0]) * omega[:, 2] * omega[:, 0] / moments[1]
+    first, second = zero_crossing_times(trajectory.ts, omega[:, 1], omega_2_rate, 2)
+    return second - first
 
-    `checks` compares the conserved energy and space angular momentum, and the
-    period (asymmetric) or precession rate (symmetric, `moments[0] == moments[1]`)
-    measured by the caller, with closed forms via `period()` / `precession_rate()`.
+
+class TorqueFreeBody(AbstractScene):
+    r"""A torque-free rigid body: the Dzhanibekov flip about its intermediate axis.
+
+    $L = \tfrac12\sum_i I_i\,\omega_i^2$, with $\boldsymbol\omega$ the body
+    angular velocity of the z-x-z Euler angles (Goldstein eq. 4.87). Spun about the
+    intermediate axis ($I_1 < I_2 < I_3$) with a small wobble, it holds still for
+    long, then turns over quickly, again and again: $\omega_2$ changes sign every
+    half period $T/2 = 2K(m)/\nu$ (Landau & Lifshitz §37; `free_body_period`).
+    Energy and the space angular momentum are conserved; for a symmetric body the
+    same formula gives $T = 2\pi/|\Omega|$, $\Omega = (I_1 - I_3)\omega_3/I_1$
+    (course text eq. 4.47).
+
+    The default start has the intermediate axis vertical, $\theta = \pi/2$, so
+    that $\mathbf L$ stays near the space z axis; then θ, the angle between the
+    body's $e_3$ and $\mathbf L$, stays above π/6 (its value mid-flip for these
+    moments), clear of the Euler angles' gimbal lock at $\sin\theta = 0$.
+    `rigid_body()` and `initial_body_state()` give the same motion on quaternions.
+
+    **Parameters:** `moments` $(I_1, I_2, I_3)$ (kg m², (1, 2, 3)), `omega0` body
+    angular velocity (rad/s, (10⁻³, 1, 10⁻³)), `angles0` Euler angles
+    (φ, θ, ψ) (rad, (0.3, π/2, 0)).
+
+    References: the course text §4.8; Landau & Lifshitz, *Mechanics*, §37;
+    Goldstein, Poole & Safko, *Classical Mechanics*, 3rd ed., §5.6.
     """
 
     moments: jax.Array
     omega0: jax.Array
     angles0: jax.Array
 
-    default_t1 = 20.0
-    default_dt = 1e-3
+    default_t1: ClassVar[float] = 60.0
+    default_dt: ClassVar[float] = 0.01
+    state_kind: ClassVar[str] = "velocity"
 
     def __init__(
         self,
         moments: Any = (1.0, 2.0, 3.0),
-        omega0: Any = (0.3, 1.0, 0.2),
-        angles0: Any = (0.3, 1.1, -0.4),
+        omega0: Any = (1e-3, 1.0, 1e-3),
+        angles0: Any = (0.3, math.pi / 2, 0.0),
     ):
         self.moments = jnp.asarray(moments, dtype=float)
         self.omega0 = jnp.asarray(omega0, dtype=float)
@@ -106,21 +137,28 @@ class TorqueFreeBody(AbstractScene):
         return euler_zxz_to_rotation(self.angles0) @ (self.moments * self.omega0)
 
     def period(self) -> jax.Array:
-        """Period of ω(t) in the body (asymmetric body)."""
+        """Period T of ω(t) in the body frame (s)."""
         momentum_squared = jnp.sum((self.moments * self.omega0) ** 2)
         return free_body_period(self.moments, self.energy(), momentum_squared)
 
     def precession_rate(self) -> jax.Array:
-        """Ω = (I1 − I3) ω3 / I1 (symmetric body, I1 = I2)."""
+        """Ω = (I1 − I3) ω3 / I1 (rad/s; symmetric body, I1 = I2)."""
         return symmetric_precession_rate(self.moments, self.omega0[2])
 
     def checks(self, trajectory: Any) -> dict[str, tuple[jax.Array, jax.Array]]:
+        """The half period from ω₂'s sign changes (needs two in the run), energy and
+        the space angular momentum along the run."""
         rotation, omega = _body_motion(trajectory, self.moments)
         space_momentum = jnp.einsum("tij,tj->ti", rotation, self.moments * omega)
         energy = 0.5 * jnp.sum(self.moments * omega**2, axis=-1)
+        half_period = _intermediate_axis_half_period(trajectory, self.moments)
         return {
-            "energy(t1)": (energy[-1], self.energy()),
-            "L_space(t1)": (space_momentum[-1], self.angular_momentum_space()),
+            "half period": (half_period, 0.5 * self.period()),
+            "energy": (energy, jnp.full_like(energy, self.energy())),
+            "angular momentum": (
+                space_momentum,
+                jnp.broadcast_to(self.angular_momentum_space(), space_momentum.shape),
+            ),
         }
 
 
@@ -138,13 +176,25 @@ def _gravity_potential(rotation, t, scene):
 
 
 class HeavySymmetricTop(AbstractScene):
-    r"""A symmetric top on a fixed tip in gravity (Goldstein §5.7).
+    r"""A heavy symmetric top on a fixed tip: it precesses and nods between two angles.
 
-    **Arguments:** `i1`, `i3` (moments about the tip), `mgl` ($M g l$), the start
-    tilt `theta0`, the spin `spin` ($\omega_3$), and the start rates `phi_dot0`,
-    `theta_dot0` (default 0: a top released from rest in $\phi$ and $\theta$).
-    The defaults are a fast top, $\epsilon = I_1 Mgl\cos\theta/(I_3\omega_3)^2
-    \approx 2\cdot10^{-3}$.
+    $L = \tfrac12 I_1(\dot\theta^2 + \dot\phi^2\sin^2\theta)
+    + \tfrac12 I_3(\dot\psi + \dot\phi\cos\theta)^2 - Mgl\cos\theta$ in the
+    course text's Euler angles. θ stays between the roots of the cubic
+    $f(u) = \dot u^2$, $u = \cos\theta$ (`nutation_bounds`); a fast top precesses
+    at about $Mgl/I_3\omega_3$ and nods at about $I_3\omega_3/I_1$
+    (`lagjax.rigid.heavy_top`). At $\sin\theta = 0$ the Euler-angle Lagrangian is
+    singular (gimbal lock); `rigid_body()` with `initial_body_state()` is the same
+    top on quaternions, which has no such point.
+
+    **Parameters:** `i1`, `i3` moments about the tip (kg m², 1 and 0.5), `mgl`
+    $Mgl$ (J, 1), start tilt `theta0` (rad, 0.5), spin `spin` $\omega_3$ (rad/s,
+    40), start rates `phi_dot0`, `theta_dot0` (rad/s, 0: released from rest in φ
+    and θ). The defaults are a fast top, $\epsilon = I_1 Mgl\cos\theta/(I_3
+    \omega_3)^2 \approx 2\cdot10^{-3}$.
+
+    References: Goldstein, Poole & Safko, *Classical Mechanics*, 3rd ed., §5.7;
+    Landau & Lifshitz, *Mechanics*, §35.
     """
 
     i1: jax.Array
@@ -155,8 +205,9 @@ class HeavySymmetricTop(AbstractScene):
     phi_dot0: jax.Array
     theta_dot0: jax.Array
 
-    default_t1 = 5.0
-    default_dt = 1e-3
+    default_t1: ClassVar[float] = 5.0
+    default_dt: ClassVar[float] = 1e-3
+    state_kind: ClassVar[str] = "velocity"
 
     def __init__(
         self,
@@ -197,12 +248,17 @@ class HeavySymmetricTop(AbstractScene):
         return nutation_bounds(self.i1, self.i3, self.mgl, *self.initial_state())
 
     def checks(self, trajectory: Any) -> dict[str, tuple[jax.Array, jax.Array]]:
+        """Extremes of θ over the *saved* times against the nutation bounds (so only
+        as close as the sampling resolves the turning points), and the spin ω3."""
         rotation, omega = _body_motion(trajectory, self.rigid_body().moments)
         theta = jnp.arccos(jnp.clip(rotation[:, 2, 2], -1.0, 1.0))
         theta_min, theta_max = self.nutation_bounds()
         spin = omega[:, 2]
         return {
-            "theta_min": (jnp.min(theta), theta_min),
-            "theta_max": (jnp.max(theta), theta_max),
-            "spin(t1)": (spin[-1], self.spin),
+            "theta min": (jnp.min(theta), theta_min),
+            "theta max": (jnp.max(theta), theta_max),
+            "spin": (spin, jnp.full_like(spin, self.spin)),
         }
+
+
+SCENES = (TorqueFreeBody, HeavySymmetricTop)

@@ -50,8 +50,6 @@ unit length after every step.
       Springer (2006), §VII.5.
 """
 
-
-import itertools
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, ClassVar
 
@@ -65,6 +63,10 @@ from lagjax.rigid.quaternion import quaternion_multiply
 from lagjax.rigid.term import RigidBodyTerm, unwrap_rigid_body_term
 from lagjax.solvers.compensated import compensated_add, zero_compensation
 
+# The composition tables and the kick merging are those of the canonical splitting
+# methods: one source for Yoshida's triple jump.
+from lagjax.solvers.splitting import _YOSHIDA4_WEIGHTS, _merged_kicks
+
 if TYPE_CHECKING:
     from typing import ClassVar as AbstractClassVar
     from typing import ClassVar as AbstractVar
@@ -76,10 +78,6 @@ _RigidState = Any
 
 # The free-body drift D_τ: (body axis, fraction of τ) in order of application.
 _FREE_BODY_ROTATIONS = ((0, 0.5), (1, 0.5), (2, 1.0), (1, 0.5), (0, 0.5))
-
-# Yoshida (1990): the fourth-order triple jump of a symmetric second-order step.
-_CBRT2 = 2.0 ** (1.0 / 3.0)
-_TRIPLE_JUMP = (1 / (2 - _CBRT2), -_CBRT2 / (2 - _CBRT2), 1 / (2 - _CBRT2))
 
 _Scalars = list[jax.Array]
 
@@ -111,12 +109,6 @@ def _turn_about_axis(axis: int, tau, moments, momentum: _Scalars, delta: _Scalar
     return change, [new_w, *new_v]
 
 
-def _merged_kicks(weights: tuple[float, ...]) -> tuple[float, ...]:
-    """Kick coefficients of a composition of kick–drift–kick steps."""
-    inner = [(left + right) / 2 for left, right in itertools.pairwise(weights)]
-    return (weights[0] / 2, *inner, weights[-1] / 2)
-
-
 def _add_to_state(y, increment, compensation):
     if compensation is None:
         return y + increment, None
@@ -144,7 +136,9 @@ class AbstractRigidBodySplitting(diffrax.AbstractSolver[_RigidState]):
     def __check_init__(self):
         weights = self.composition_weights
         if abs(sum(weights) - 1) > 1e-13 or list(weights) != list(reversed(weights)):
-            raise ValueError(f"composition weights {weights} must be a palindrome summing to 1")
+            raise ValueError(
+                f"composition weights {weights} must be a palindrome summing to 1"
+            )
 
     def order(self, terms: Any) -> int:
         return self.nominal_order
@@ -155,34 +149,10 @@ class AbstractRigidBodySplitting(diffrax.AbstractSolver[_RigidState]):
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
         del made_jump  # nothing is carried between steps but round-off
         term, direction = unwrap_rigid_body_term(terms)
-        body = term.body
         # Physical start time and step (diffrax runs t1 < t0 in reversed time).
         start, h = direction * t0, direction * (t1 - t0)
         q0, momentum0 = y0
-        moments = [body.moments[i] for i in range(3)]
-        delta = [jnp.zeros_like(h * q0[0])] * 4
-        change = [jnp.zeros_like(h * momentum0[0])] * 3
-
-        def kick(coefficient, clock):
-            q_now = q0 + quaternion_multiply(q0, jnp.stack(delta))
-            torque = body.torque(q_now, start + clock * h, args)
-            return [change[i] + coefficient * h * torque[i] for i in range(3)]
-
-        kicks = _merged_kicks(self.composition_weights)
-        clock = 0.0
-        for stage, weight in enumerate(self.composition_weights):
-            if body.potential is not None:
-                change = kick(kicks[stage], clock)
-            for axis, fraction in _FREE_BODY_ROTATIONS:
-                momentum = [momentum0[i] + change[i] for i in range(3)]
-                turn, delta = _turn_about_axis(
-                    axis, fraction * weight * h, moments, momentum, delta
-                )
-                change = [change[i] + turn[i] for i in range(3)]
-            clock += weight
-        if body.potential is not None:
-            change = kick(kicks[-1], 1.0)
-
+        delta, change = self._increments(term.body, start, h, q0, momentum0, args)
         compensation_q, compensation_p = solver_state or (None, None)
         q1, compensation_q = _add_to_state(
             q0, quaternion_multiply(q0, jnp.stack(delta)), compensation_q
@@ -194,6 +164,47 @@ class AbstractRigidBodySplitting(diffrax.AbstractSolver[_RigidState]):
             solver_state = (compensation_q, compensation_p)
         y1 = (q1, momentum1)
         return y1, None, dict(y0=y0, y1=y1), solver_state, RESULTS.successful
+
+    def _increments(self, body, start, h, q0, momentum0, args):
+        """(δ, ΔΠ) of one step, as four and three scalars.
+
+        The stages run as a `lax.scan` over the coefficient table, so XLA compiles
+        one stage however many there are. Unrolled, the long chain of scalar
+        rotations of a composition compiled (on CPU, with traced moments) to code
+        60× slower: 170 μs against 2.7 μs per Yoshida4 step.
+        """
+
+        def kick(change, delta, coefficient, clock):
+            q_now = q0 + quaternion_multiply(q0, jnp.stack(delta))
+            torque = body.torque(q_now, start + clock * h, args)
+            return [change[i] + coefficient * h * torque[i] for i in range(3)]
+
+        def stage(carry, coefficients):
+            change, delta = carry
+            weight, kick_coefficient, clock = coefficients
+            if body.potential is not None:
+                change = kick(change, delta, kick_coefficient, clock)
+            for axis, fraction in _FREE_BODY_ROTATIONS:
+                momentum = [momentum0[i] + change[i] for i in range(3)]
+                turn, delta = _turn_about_axis(
+                    axis, fraction * weight * h, moments, momentum, delta
+                )
+                change = [change[i] + turn[i] for i in range(3)]
+            return (change, delta), None
+
+        moments = [body.moments[i] for i in range(3)]
+        weights = self.composition_weights
+        kicks = _merged_kicks(weights)
+        clocks = [sum(weights[:stage]) for stage in range(len(weights))]
+        table = jnp.asarray([weights, kicks[:-1], clocks]).T
+        carry = (
+            [jnp.zeros_like(h * momentum0[0])] * 3,
+            [jnp.zeros_like(h * q0[0])] * 4,
+        )
+        (change, delta), _ = jax.lax.scan(stage, carry, table)
+        if body.potential is not None:
+            change = kick(change, delta, kicks[-1], 1.0)
+        return delta, change
 
     def func(self, terms, t0, y0, args):
         return terms.vf(t0, y0, args)
@@ -236,7 +247,7 @@ class RigidBodyYoshida4(AbstractRigidBodySplitting):
         - McLachlan, Phys. Rev. Lett. 71, 3043 (1993).
     """
 
-    composition_weights: ClassVar[tuple[float, ...]] = _TRIPLE_JUMP
+    composition_weights: ClassVar[tuple[float, ...]] = _YOSHIDA4_WEIGHTS
     nominal_order: ClassVar[int] = 4
     compensated: bool = eqx.field(default=True, static=True)
 
