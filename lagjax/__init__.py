@@ -12,6 +12,7 @@ from .mechanics.canonical import GeneratingFunction as GeneratingFunction
 from .mechanics.canonical import is_canonical as is_canonical
 from .mechanics.canonical import symplectic_defect as symplectic_defect
 from .mechanics.canonical import symplectic_form as symplectic_form
+from .mechanics.constraints import Constraints as Constraints
 from .mechanics.euler_lagrange import (
     euler_lagrange_acceleration as euler_lagrange_acceleration,
 )
@@ -28,6 +29,10 @@ from .rigid.term import RigidBodyTerm as RigidBodyTerm
 from .simulate import simulate as simulate
 from .solvers.implicit import GaussLegendre as GaussLegendre
 from .solvers.implicit import ImplicitMidpoint as ImplicitMidpoint
+from .solvers.projection import ConstrainedLagrangianTerm as ConstrainedLagrangianTerm
+from .solvers.projection import ConstraintProjection as ConstraintProjection
+from .solvers.rattle import Rattle as Rattle
+from .solvers.rattle import RattleTerm as RattleTerm
 from .solvers.rigid import QuaternionProjection as QuaternionProjection
 from .solvers.rigid import RigidBodyVerlet as RigidBodyVerlet
 from .solvers.rigid import RigidBodyYoshida4 as RigidBodyYoshida4

@@ -30,6 +30,7 @@ from jax.flatten_util import ravel_pytree  # noqa: E402
 from . import scenes as scene_catalog  # noqa: E402
 from .simulate import simulate  # noqa: E402
 from .solvers.implicit import GaussLegendre, ImplicitMidpoint  # noqa: E402
+from .solvers.rattle import Rattle  # noqa: E402
 from .solvers.rigid import RigidBodyVerlet, RigidBodyYoshida4  # noqa: E402
 from .solvers.splitting import (  # noqa: E402
     BlanesMoan4,
@@ -59,6 +60,7 @@ SOLVERS: dict[str, Callable[[], diffrax.AbstractSolver]] = {
     "Kvaerno5": diffrax.Kvaerno5,
     "RigidBodyVerlet": RigidBodyVerlet,
     "RigidBodyYoshida4": RigidBodyYoshida4,
+    "Rattle": Rattle,
 }
 SAVED_POINTS = 401
 PROGRESS_STEPS = 200_000

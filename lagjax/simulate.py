@@ -10,6 +10,8 @@ One entry point for every system and solver:
 | any Hamiltonian | non-partitioned | (q, p), one `ODETerm` with Hamilton's equations |
 | `SeparableHamiltonian` | partitioned (StormerVerlet, Yoshida4, …) | (q, p), terms (∂T/∂p, −∂V/∂q) |
 | `RigidBody` | rigid-body splittings, or any solver | (unit quaternion, body angular momentum), `RigidBodyTerm` |
+| constrained `Lagrangian` | any non-partitioned diffrax solver, wrapped in `ConstraintProjection` | (q, q̇), `ConstrainedLagrangianTerm` |
+| constrained `Lagrangian` | `Rattle` (holonomic, constant mass matrix) | (q, p), `RattleTerm` |
 
 A solver is *partitioned* when its diffrax `term_structure` is a pair of terms
 (lagjax's splitting methods and diffrax's `SemiImplicitEuler`). With `dt` the steps are
@@ -37,6 +39,8 @@ from .rigid.body import RigidBody
 from .rigid.term import RigidBodyTerm
 from .scenes.base import AbstractScene
 from .solvers.implicit import AbstractGaussLegendre
+from .solvers.projection import ConstrainedLagrangianTerm, ConstraintProjection
+from .solvers.rattle import Rattle, RattleTerm
 from .solvers.rigid import QuaternionProjection, RigidBodyYoshida4
 from .solvers.splitting import Yoshida4
 from .solvers.variational import LagrangianTerm
@@ -59,9 +63,13 @@ def default_solver(system: MechanicalSystem, dt: Any) -> diffrax.AbstractSolver:
     symplectic, order 4); a `RigidBody` `RigidBodyYoshida4` (Lie–Poisson splitting);
     anything else `GaussLegendre(stages=2)` (implicit, symplectic, order 4).
     Adaptive (`dt` None): `Tsit5` with error control (on a rigid body with the
-    quaternion projected back to unit length).
+    quaternion projected back to unit length). A constrained `Lagrangian` gets
+    `Tsit5` projected onto its constraints after each step, fixed step or not.
     """
     from .solvers.implicit import GaussLegendre
+
+    if _is_constrained(system):
+        return ConstraintProjection(diffrax.Tsit5())
 
     if isinstance(system, RigidBody):
         return (
@@ -76,8 +84,38 @@ def default_solver(system: MechanicalSystem, dt: Any) -> diffrax.AbstractSolver:
     return GaussLegendre(stages=2)
 
 
+def _is_constrained(system: MechanicalSystem) -> bool:
+    return isinstance(system, Lagrangian) and system.constraints is not None
+
+
+def _constrained_solver(solver: diffrax.AbstractSolver) -> diffrax.AbstractSolver:
+    """The solver for a constrained Lagrangian: plain ones get the projection."""
+    if isinstance(solver, (ConstraintProjection, Rattle)):
+        return solver
+    structure_preserving = (
+        is_partitioned(solver)
+        or isinstance(solver, AbstractGaussLegendre)
+        or solver.term_structure is LagrangianTerm
+    )
+    if structure_preserving or not isinstance(solver.term_structure, type):
+        raise ValueError(
+            f"{type(solver).__name__} does not enforce constraints. Integrate a "
+            "constrained Lagrangian with an (explicit or implicit) diffrax solver, "
+            "which simulate projects onto the constraints after each step, or with "
+            "Rattle (holonomic constraints, constant mass matrix)."
+        )
+    return ConstraintProjection(solver)
+
+
 def _terms_and_state(system: MechanicalSystem, solver, y0, t0, args):
     """diffrax terms, initial state and the system that state belongs to."""
+    if _is_constrained(system):
+        assert isinstance(system, Lagrangian)
+        if solver.term_structure is not RattleTerm:
+            return ConstrainedLagrangianTerm(system), y0, system
+        q0, qdot0 = y0
+        state0 = (q0, system.momentum(q0, qdot0, t0, args))
+        return RattleTerm(system), state0, system.to_hamiltonian()
     if isinstance(system, RigidBody):
         return RigidBodyTerm(system), y0, system
     if solver.term_structure is LagrangianTerm:
@@ -199,6 +237,8 @@ def simulate(
         system, args = system.system(), system
     if solver is None:
         solver = default_solver(system, dt)
+    if _is_constrained(system):
+        solver = _constrained_solver(solver)
     terms, state0, integrated = _terms_and_state(system, solver, y0, t0, args)
     scan_path = (
         dt is not None

@@ -23,6 +23,7 @@ import jax
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
+from .constraints import Constraints, constrained_motion
 from .euler_lagrange import euler_lagrange_acceleration
 from .legendre import tree_dot
 from .signature import (
@@ -48,6 +49,10 @@ class Lagrangian(eqx.Module):
     - `quadratic_in_velocity`: declare that L is at most quadratic in q̇
       ($\tfrac12\dot q^T M(q)\dot q + a(q)\cdot\dot q - V(q)$). The Legendre transform
       is then one linear solve instead of a Newton iteration.
+    - `constraints`: optional holonomic constraint `g(q[, t[, args]]) = 0` (scalar or
+      1-D array), or a `Constraints` object (also nonholonomic ones). `acceleration`
+      then includes the constraint forces; `multipliers` and `constraint_force`
+      give them (see `lagjax.mechanics.constraints`).
 
     `t` defaults to 0.0 and `args` to None in every method.
     """
@@ -59,6 +64,7 @@ class Lagrangian(eqx.Module):
     dissipation: Callable | None = eqx.field(static=True)
     dissipation_arity: int = eqx.field(static=True)
     quadratic_in_velocity: bool = eqx.field(static=True)
+    constraints: Constraints | None
 
     def __init__(
         self,
@@ -67,6 +73,7 @@ class Lagrangian(eqx.Module):
         force: Callable | None = None,
         dissipation: Callable | None = None,
         quadratic_in_velocity: bool = False,
+        constraints: Callable | Constraints | None = None,
     ):
         self.function = L
         self.arity = positional_arity(L, minimum=2, maximum=4, what="the Lagrangian L")
@@ -85,6 +92,9 @@ class Lagrangian(eqx.Module):
             )
         )
         self.quadratic_in_velocity = quadratic_in_velocity
+        if constraints is not None and not isinstance(constraints, Constraints):
+            constraints = Constraints(holonomic=constraints)
+        self.constraints = constraints
 
     def __call__(self, q: Any, qdot: Any, t: Any = 0.0, args: Any = None) -> jax.Array:
         """The value of L."""
@@ -131,7 +141,7 @@ class Lagrangian(eqx.Module):
         """
         check_same_structure(q, qdot, "q", "qdot")
         self(q, qdot, t, args)  # trace-time checks of L's output; no run-time cost
-        return euler_lagrange_acceleration(
+        free = euler_lagrange_acceleration(
             self._call_unchecked,
             q,
             qdot,
@@ -140,6 +150,35 @@ class Lagrangian(eqx.Module):
             self.generalized_force(q, qdot, t, args),
             check=check,
         )
+        if self.constraints is None:
+            return free
+        return constrained_motion(self, q, qdot, t, args, free, check=check)[0]
+
+    def multipliers(
+        self, q: Any, qdot: Any, t: Any = 0.0, args: Any = None
+    ) -> jax.Array:
+        """Lagrange multipliers λ (holonomic rows first) of a constrained system."""
+        return self._constrained_motion(q, qdot, t, args)[1]
+
+    def constraint_force(
+        self, q: Any, qdot: Any, t: Any = 0.0, args: Any = None
+    ) -> Any:
+        """The generalized constraint force Aᵀλ (structure of `q`)."""
+        return self._constrained_motion(q, qdot, t, args)[2]
+
+    def _constrained_motion(self, q, qdot, t, args):
+        if self.constraints is None:
+            raise ValueError("this Lagrangian has no constraints")
+        check_same_structure(q, qdot, "q", "qdot")
+        free = euler_lagrange_acceleration(
+            self._call_unchecked,
+            q,
+            qdot,
+            t,
+            args,
+            self.generalized_force(q, qdot, t, args),
+        )
+        return constrained_motion(self, q, qdot, t, args, free, check=True)
 
     def _call_unchecked(self, q, qdot, t, args):
         return call_with_arity(self.function, self.arity, q, qdot, t, args)

@@ -22,6 +22,7 @@ def catalog() -> dict[str, type[AbstractScene]]:
     from . import (
         central,
         chains,
+        constrained,
         earth,
         fields,
         oscillators,
@@ -30,7 +31,17 @@ def catalog() -> dict[str, type[AbstractScene]]:
         rotating,
     )
 
-    modules = (oscillators, pendulums, chains, earth, rotating, central, fields, rigid)
+    modules = (
+        oscillators,
+        pendulums,
+        chains,
+        earth,
+        rotating,
+        central,
+        fields,
+        rigid,
+        constrained,
+    )
     return {_command_name(cls): cls for module in modules for cls in module.SCENES}
 
 

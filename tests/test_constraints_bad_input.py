@@ -1,0 +1,78 @@
+"""Bad constraints get an error that names the problem, never a silent wrong force."""
+
+import jax
+import jax.numpy as jnp
+import pytest
+
+import lagjax as lj
+from lagjax.mechanics.constraints import Constraints
+
+
+def free_particle(q, qdot):
+    return 0.5 * jnp.sum(qdot**2) - 9.81 * q[1]
+
+
+def squared_length(q):
+    # Degenerate at the origin: its gradient G = q vanishes there.
+    return 0.5 * (q[0] ** 2 + q[1] ** 2 - 1.0)
+
+
+def test_rank_deficient_jacobian_at_the_state_raises_inside_jit():
+    lag = lj.Lagrangian(free_particle, constraints=squared_length)
+    with pytest.raises(Exception, match="rank-deficient"):
+        jax.block_until_ready(jax.jit(lag.acceleration)(jnp.zeros(2), jnp.zeros(2)))
+
+
+def test_redundant_constraints_raise():
+    lag = lj.Lagrangian(
+        free_particle, constraints=lambda q: jnp.stack([q[0] - 1.0, 2 * q[0] - 2.0])
+    )
+    with pytest.raises(Exception, match="rank-deficient"):
+        jax.block_until_ready(lag.multipliers(jnp.ones(2), jnp.zeros(2)))
+
+
+def test_simulate_from_a_degenerate_state_names_the_constraint():
+    lag = lj.Lagrangian(free_particle, constraints=squared_length)
+    with pytest.raises(Exception, match="rank-deficient"):
+        run = lj.simulate(lag, (jnp.zeros(2), jnp.zeros(2)), t1=0.1, dt=0.01)
+        jax.block_until_ready(run.q)
+
+
+def test_constraint_returning_a_matrix_is_rejected():
+    lag = lj.Lagrangian(free_particle, constraints=lambda q: jnp.outer(q, q))
+    with pytest.raises(ValueError, match="scalar or a 1-D array"):
+        lag.acceleration(jnp.ones(2), jnp.zeros(2))
+
+
+def test_constraint_returning_integers_is_rejected():
+    lag = lj.Lagrangian(free_particle, constraints=lambda q: jnp.int32(1))
+    with pytest.raises(ValueError, match="real floats"):
+        lag.acceleration(jnp.ones(2), jnp.zeros(2))
+
+
+def test_more_constraints_than_coordinates_is_rejected():
+    lag = lj.Lagrangian(free_particle, constraints=lambda q: jnp.concatenate([q, q]))
+    with pytest.raises(ValueError, match="4 constraints on 2 coordinates"):
+        lag.acceleration(jnp.ones(2), jnp.zeros(2))
+
+
+def test_constraint_must_be_callable_and_nonempty():
+    with pytest.raises(TypeError, match="must be callable"):
+        lj.Lagrangian(free_particle, constraints=3.0)
+    with pytest.raises(ValueError, match="needs a holonomic or a velocity"):
+        Constraints()
+    with pytest.raises(ValueError, match="baumgarte_rate"):
+        Constraints(squared_length, baumgarte_rate=-1.0)
+
+
+def test_multipliers_of_an_unconstrained_system():
+    with pytest.raises(ValueError, match="no constraints"):
+        lj.Lagrangian(free_particle).multipliers(jnp.ones(2), jnp.zeros(2))
+
+
+@pytest.mark.parametrize("solver", [lj.GaussLegendre(stages=2), lj.StormerVerlet()])
+def test_solvers_that_would_ignore_the_constraints_are_refused(solver):
+    lag = lj.Lagrangian(free_particle, constraints=squared_length)
+    y0 = (jnp.array([1.0, 0.0]), jnp.zeros(2))
+    with pytest.raises(ValueError, match="does not enforce constraints"):
+        lj.simulate(lag, y0, t1=0.1, dt=0.01, solver=solver)
