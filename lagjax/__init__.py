@@ -7,6 +7,7 @@ modes by automatic differentiation.
 
 from . import rigid as rigid
 from . import scenes as scenes
+from .mechanics import particles as particles
 from .mechanics.brackets import poisson_bracket as poisson_bracket
 from .mechanics.canonical import GeneratingFunction as GeneratingFunction
 from .mechanics.canonical import is_canonical as is_canonical
@@ -24,8 +25,13 @@ from .mechanics.lagrangian import Lagrangian as Lagrangian
 from .mechanics.modes import equilibrium as equilibrium
 from .mechanics.modes import normal_modes as normal_modes
 from .mechanics.modes import stiffness_matrices as stiffness_matrices
+from .mechanics.particles import newtonian_gravity as newtonian_gravity
+from .mechanics.particles import particle_hamiltonian as particle_hamiltonian
+from .mechanics.particles import particle_lagrangian as particle_lagrangian
 from .rigid.body import RigidBody as RigidBody
 from .rigid.term import RigidBodyTerm as RigidBodyTerm
+from .shooting import action_between as action_between
+from .shooting import trajectory_between as trajectory_between
 from .simulate import simulate as simulate
 from .solvers.implicit import GaussLegendre as GaussLegendre
 from .solvers.implicit import ImplicitMidpoint as ImplicitMidpoint
@@ -46,5 +52,8 @@ from .solvers.variational import LagrangianTerm as LagrangianTerm
 from .solvers.variational import VariationalMidpoint as VariationalMidpoint
 from .sweep import sweep as sweep
 from .trajectory import Trajectory as Trajectory
+from .variational_principles import action as action
+from .variational_principles import action_of_path as action_of_path
+from .variational_principles import principal_function as principal_function
 
 __version__ = "0.1.0"

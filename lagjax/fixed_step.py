@@ -17,6 +17,7 @@ import math
 from typing import Any
 
 import diffrax
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 
@@ -34,6 +35,9 @@ def fixed_step_count(t0: float, t1: float, dt: float) -> int:
     return max(1, math.ceil(ratio))
 
 
+# Compiled once per (terms, solver, times, state structure): terms and solvers are
+# equinox Modules that compare by value, so repeated runs reuse the compilation.
+@eqx.filter_jit
 def integrate_fixed_steps(
     terms: Any,
     solver: diffrax.AbstractSolver,

@@ -45,6 +45,12 @@ from .solvers.rigid import QuaternionProjection, RigidBodyYoshida4
 from .solvers.splitting import Yoshida4
 from .solvers.variational import LagrangianTerm
 from .trajectory import Trajectory
+from .vector_fields import (
+    HamiltonVectorField,
+    LagrangianVectorField,
+    SeparableDrift,
+    SeparableKick,
+)
 
 MechanicalSystem = Lagrangian | AbstractHamiltonian | RigidBody
 System = MechanicalSystem | AbstractScene
@@ -134,12 +140,7 @@ def _terms_and_state(system: MechanicalSystem, solver, y0, t0, args):
                 "Hamiltonians H = T(p) + V(q); integrate a Lagrangian with an implicit "
                 "symplectic method (GaussLegendre, ImplicitMidpoint) or an adaptive one."
             )
-
-        def lagrangian_field(t, y, args):
-            q, qdot = y
-            return qdot, system.acceleration(q, qdot, t, args, check=False)
-
-        return diffrax.ODETerm(lagrangian_field), y0, system
+        return diffrax.ODETerm(LagrangianVectorField(system)), y0, system
     if isinstance(system, Lagrangian):
         hamiltonian = system.to_hamiltonian()
         q0, qdot0 = y0
@@ -157,10 +158,10 @@ def _hamiltonian_terms(system: AbstractHamiltonian, solver):
                 "ImplicitMidpoint or an adaptive diffrax solver."
             )
         return (
-            diffrax.ODETerm(lambda t, p, args: system.velocity(None, p, t, args)),
-            diffrax.ODETerm(lambda t, q, args: system.potential_force(q, t, args)),
+            diffrax.ODETerm(SeparableDrift(system)),
+            diffrax.ODETerm(SeparableKick(system)),
         )
-    return diffrax.ODETerm(lambda t, y, args: system.vector_field(y[0], y[1], t, args))
+    return diffrax.ODETerm(HamiltonVectorField(system))
 
 
 def _stepping(solver, t0, t1, dt, rtol, atol):
