@@ -171,3 +171,19 @@ def test_rattle_refuses_what_it_cannot_integrate():
     )
     with pytest.raises(ValueError, match="generalized force"):
         lj.simulate(forced, y0, t1=0.1, dt=0.01, solver=Rattle())
+
+
+def test_rattle_refuses_a_varying_mass_matrix():
+    # RATTLE reads M once; a q-dependent M must be an error, not a wrong trajectory.
+    lag = lj.Lagrangian(
+        lambda q, v: 0.5 * (1 + q[0] ** 2) * v[0] ** 2 + 0.5 * v[1] ** 2 - q[1],
+        constraints=lambda q: q[0] ** 2 + q[1] ** 2 - 1.0,
+    )
+    with pytest.raises(Exception, match="constant mass matrix"):
+        lj.simulate(
+            lag,
+            (jnp.array([0.6, 0.8]), jnp.zeros(2)),
+            t1=0.1,
+            dt=0.01,
+            solver=lj.Rattle(),
+        )

@@ -97,6 +97,27 @@ def _holonomic_constraints(lagrangian: Lagrangian) -> Constraints:
 _RattleState = tuple[jax.Array, jax.Array, Any]
 
 
+def _raise_if_mass_varies(lagrangian, q0, t0, args, inverse_mass):
+    """Refuse a position- or velocity-dependent mass matrix instead of integrating it
+    wrongly: RATTLE here reads M once. The test is at the start (∂M/∂q, ∂M/∂q̇ and
+    ∂M/∂t vanish there for a constant M), so it cannot miss a generic dependence."""
+    q_flat, unravel = ravel_pytree(q0)
+    zero = jnp.zeros_like(q_flat)
+
+    def mass(q, qdot, t):
+        return lagrangian.mass_matrix(unravel(q), unravel(qdot), t, args)
+
+    rates = jax.jacfwd(mass, argnums=(0, 1, 2))(q_flat, zero, jnp.asarray(t0, float))
+    variation = jnp.max(jnp.stack([jnp.max(jnp.abs(rate)) for rate in rates]))
+    scale = jnp.max(jnp.abs(mass(q_flat, zero, jnp.asarray(t0, float))))
+    return eqx.error_if(
+        inverse_mass,
+        variation > 1e-12 * scale,
+        "Rattle needs a constant mass matrix (L = ½q̇ᵀMq̇ − V); this L's mass matrix "
+        "varies with q, q̇ or t. Use the projected solvers (the default) instead.",
+    )
+
+
 class Rattle(diffrax.AbstractSolver[_RattleState]):
     r"""RATTLE for holonomic constraints (order 2, symplectic, symmetric).
 
@@ -147,6 +168,9 @@ class Rattle(diffrax.AbstractSolver[_RattleState]):
         identity = jnp.eye(q_flat.shape[0], dtype=q_flat.dtype)
         inverse_mass, singular = solve_dense(mass, identity)
         inverse_mass = raise_if_singular(inverse_mass, singular, "The mass matrix M")
+        inverse_mass = _raise_if_mass_varies(
+            lagrangian, q0, direction * t0, args, inverse_mass
+        )
         guess = jnp.zeros_like(constraints.position_residual(q0, t0, args))
         compensation = zero_compensation(y0) if self.compensated else None
         return inverse_mass, guess, compensation
