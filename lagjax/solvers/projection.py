@@ -35,6 +35,7 @@ from jax.flatten_util import ravel_pytree
 from lagjax.mechanics.constraints import least_correction, raise_if_rank_deficient
 from lagjax.mechanics.lagrangian import Lagrangian
 from lagjax.mechanics.linalg import solve_dense
+from lagjax.solvers.projected import AbstractProjectedSolver
 
 
 class ConstrainedLagrangianTerm(diffrax.AbstractTerm):
@@ -139,7 +140,7 @@ def project_onto_constraints(
     return (q, qdot), diffrax.RESULTS.promote(result)
 
 
-class ConstraintProjection(diffrax.AbstractWrappedSolver):
+class ConstraintProjection(AbstractProjectedSolver):
     r"""A diffrax solver on a constrained Lagrangian, projected after every step.
 
     `lj.simulate` wraps any plain diffrax solver (Tsit5, Dopri8, Kvaerno5, …) in it
@@ -162,30 +163,10 @@ class ConstraintProjection(diffrax.AbstractWrappedSolver):
     rtol: float = 1e-14
     atol: float = 1e-14
 
-    @property
-    def term_structure(self):  # pyright: ignore[reportIncompatibleVariableOverride]
-        return self.solver.term_structure
-
-    @property
-    def interpolation_cls(self):  # pyright: ignore[reportIncompatibleVariableOverride]
-        return self.solver.interpolation_cls
-
-    def order(self, terms: Any) -> int | None:
-        return self.solver.order(terms)
-
-    def error_order(self, terms: Any):
-        return self.solver.error_order(terms)
-
-    def init(self, terms, t0, t1, y0, args):
-        return self.solver.init(terms, t0, t1, y0, args)
-
-    def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
-        y1, error, dense_info, solver_state, result = self.solver.step(
-            terms, t0, t1, y0, args, solver_state, made_jump
-        )
+    def project(self, terms, t1, y1, args):
         term, direction = unwrap_constrained_term(terms, ConstrainedLagrangianTerm)
         q1, qdot1 = y1
-        y1, projection_result = project_onto_constraints(
+        return project_onto_constraints(
             term.lagrangian,
             q1,
             qdot1,
@@ -194,12 +175,3 @@ class ConstraintProjection(diffrax.AbstractWrappedSolver):
             rtol=self.rtol,
             atol=self.atol,
         )
-        result = diffrax.RESULTS.where(
-            result == diffrax.RESULTS.successful, projection_result, result
-        )
-        if "y1" in dense_info:
-            dense_info = {**dense_info, "y1": y1}
-        return y1, error, dense_info, solver_state, result
-
-    def func(self, terms, t0, y0, args):
-        return self.solver.func(terms, t0, y0, args)

@@ -62,6 +62,7 @@ from diffrax import RESULTS, LocalLinearInterpolation
 from lagjax.rigid.quaternion import quaternion_multiply
 from lagjax.rigid.term import RigidBodyTerm, unwrap_rigid_body_term
 from lagjax.solvers.compensated import compensated_add, zero_compensation
+from lagjax.solvers.projected import AbstractProjectedSolver
 
 # The composition tables and the kick merging are those of the canonical splitting
 # methods: one source for Yoshida's triple jump.
@@ -252,7 +253,7 @@ class RigidBodyYoshida4(AbstractRigidBodySplitting):
     compensated: bool = eqx.field(default=True, static=True)
 
 
-class QuaternionProjection(diffrax.AbstractWrappedSolver):
+class QuaternionProjection(AbstractProjectedSolver):
     r"""Any diffrax solver on a rigid body, with $q \mapsto q/|q|$ after each step.
 
     The baseline for the Lie–Poisson methods: an adaptive Runge–Kutta method (say
@@ -270,32 +271,8 @@ class QuaternionProjection(diffrax.AbstractWrappedSolver):
 
     solver: diffrax.AbstractSolver
 
-    @property
-    def term_structure(self):  # pyright: ignore[reportIncompatibleVariableOverride]
-        return self.solver.term_structure
-
-    @property
-    def interpolation_cls(self):  # pyright: ignore[reportIncompatibleVariableOverride]
-        return self.solver.interpolation_cls
-
-    def order(self, terms: Any) -> int | None:
-        return self.solver.order(terms)
-
-    def error_order(self, terms: Any):
-        return self.solver.error_order(terms)
-
-    def init(self, terms, t0, t1, y0, args):
-        return self.solver.init(terms, t0, t1, y0, args)
-
-    def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
-        y1, error, dense_info, solver_state, result = self.solver.step(
-            terms, t0, t1, y0, args, solver_state, made_jump
-        )
+    def project(self, terms, t1, y1, args):
+        del terms, t1, args
         quaternion, body_momentum = y1
-        y1 = (quaternion / jnp.linalg.norm(quaternion), body_momentum)
-        if "y1" in dense_info:
-            dense_info = {**dense_info, "y1": y1}
-        return y1, error, dense_info, solver_state, result
-
-    def func(self, terms, t0, y0, args):
-        return self.solver.func(terms, t0, y0, args)
+        unit = (quaternion / jnp.linalg.norm(quaternion), body_momentum)
+        return unit, diffrax.RESULTS.successful
