@@ -5,6 +5,7 @@ derives the equations of motion, Legendre transforms, Poisson brackets and norma
 modes by automatic differentiation.
 """
 
+from . import diagnostics as diagnostics
 from . import rigid as rigid
 from . import scenes as scenes
 from .mechanics import particles as particles

@@ -274,14 +274,8 @@ def _command_bench(args) -> int:
 
     script = Path(__file__).resolve().parent.parent / "benchmarks" / "work_precision.py"
     if not script.exists():
-        script = (
-            Path(__file__).resolve().parent.parent / "benchmarks" / "solver_overhead.py"
-        )
-    if not script.exists():
         raise UsageError("the benchmarks/ folder is not next to this installation")
-    sys.argv = [str(script)] + (
-        ["--steps", "10000", "--batch", "64"] if args.quick else []
-    )
+    sys.argv = [str(script)] + (["--quick"] if args.quick else [])
     runpy.run_path(str(script), run_name="__main__")
     return 0
 

@@ -5,8 +5,9 @@ the tests, exposed so that users can judge their own runs the same way:
 
 | helper | measures |
 |---|---|
-| `energy_error(run)` | $\max_t |E(t) - E_0| / |E_0|$ along a saved run |
-| `final_state_error(state, reference)` | $\|y - y_{\rm ref}\|_2 / \|y_{\rm ref}\|_2$ of the final (q, q̇) |
+| `energy_error(run)` | $\max_t \lvert E(t) - E_0\rvert / \lvert E_0\rvert$ along a saved run |
+| `final_state_error(state, reference)` | $\lVert y - y_{\rm ref}\rVert_2 / \lVert y_{\rm ref}\rVert_2$, final (q, q̇) |
+| `sample_times(t0, t1, count, dt)` | save times for `energy_error` that see every phase |
 | `convergence_order(dts, errors)` | least-squares slope of $\log e$ against $\log\Delta t$ |
 | `time_run(fn, *args)` | compile seconds and the median of warm, blocked runs |
 | `median_ratio(a, b)` | median of a/b over paired points (a method against its twin) |
@@ -69,7 +70,8 @@ def time_run(
     **Arguments:**
     - `fn`: with `jit=True`, a JAX-traceable function of `args`, which must be
       arrays or pytrees of arrays (close over anything else); with `jit=False`, any
-      Python callable (a scipy run), whose first call is the warm-up.
+      Python callable (a scipy run; pass `warmup=0` if a first call costs no more
+      than the others).
     - `repeats`: at most this many timed runs (at least one).
     - `warmup`: untimed runs first, so that caches and allocators are warm.
     - `max_seconds`: stop repeating once the timed runs add up to this much, so a
@@ -155,6 +157,32 @@ def energy_error(run: Any, reference: Any = None) -> Any:
     return deviation / scale
 
 
+def sample_times(
+    t0: float, t1: float, count: int, dt: float | None = None, seed: int = 0
+) -> np.ndarray:
+    r"""`count` increasing save times from `t0`, one at a random place in each of
+    `count` equal slices of [t0, t1]; with `dt`, on the step grid $t_0 + k\,\Delta t$.
+
+    What to pass as `ts` when measuring `energy_error`. Evenly spaced samples can be
+    commensurate with the motion — a run of 100 Kepler periods saved 101 times sees
+    every orbit at the same phase — and then miss the peaks of the error, by orders
+    of magnitude; stratified random samples see every phase. On the grid, the saved
+    states are the method's own, not interpolated between steps. The first time is
+    `t0`, so `energy_error` measures from the initial energy.
+    """
+    offsets = np.random.default_rng(seed).uniform(size=count)
+    offsets[0] = 0.0
+    fractions = (np.arange(count) + offsets) / count
+    if dt is None:
+        return t0 + (t1 - t0) * fractions
+    steps = round(abs((t1 - t0) / dt))
+    if steps < count:
+        raise ValueError(f"{steps} steps cannot hold {count} distinct save times")
+    edges = np.arange(count + 1) * steps // count  # whole steps per slice
+    picks = edges[:-1] + np.floor(offsets * np.diff(edges)).astype(int)
+    return t0 + dt * picks
+
+
 def convergence_order(dts: Any, errors: Any) -> float:
     r"""Least-squares slope of $\log e$ against $\log\Delta t$: the observed order.
 
@@ -163,13 +191,13 @@ def convergence_order(dts: Any, errors: Any) -> float:
     where the error saturates. Costs work too: against the number of steps the
     slope is $-p$.
     """
-    x = np.log(np.asarray(dts, dtype=float))
-    y = np.log(np.asarray(errors, dtype=float))
-    if x.shape != y.shape or x.size < 2:
+    steps, sizes = np.asarray(dts, dtype=float), np.asarray(errors, dtype=float)
+    if steps.shape != sizes.shape or steps.ndim != 1 or steps.size < 2:
         raise ValueError("convergence_order needs two or more (dt, error) pairs")
-    if not (np.all(np.isfinite(x)) and np.all(np.isfinite(y))):
+    values = np.concatenate([steps, sizes])
+    if not (np.all(np.isfinite(values)) and np.all(values > 0)):
         raise ValueError("step sizes and errors must be positive and finite")
-    slope, _ = np.polyfit(x, y, 1)
+    slope, _ = np.polyfit(np.log(steps), np.log(sizes), 1)
     return float(slope)
 
 
@@ -200,3 +228,50 @@ def failure_reason(error: BaseException) -> str:
         return raised[-1].strip()
     lines = [line.strip() for line in text.splitlines() if line.strip()]
     return f"{type(error).__name__}: {lines[0] if lines else ''}"
+
+
+class WorkPrecisionPoint(NamedTuple):
+    """One measured run of a work-precision diagram: a method at one setting."""
+
+    method: str
+    setting: float
+    run_seconds: float
+    error: float
+
+
+def fastest_within(points: Any, level: float) -> WorkPrecisionPoint | None:
+    """The fastest point whose error is at most `level`; None when none reaches it.
+
+    Reading a work-precision diagram at a fixed accuracy — "which method gets to
+    1e-6 first?" — is how methods are compared (Hairer, Nørsett & Wanner §II.10).
+    """
+    reached = [
+        point for point in points if math.isfinite(point.error) and point.error <= level
+    ]
+    return min(reached, key=lambda point: point.run_seconds, default=None)
+
+
+def plot_work_precision(points: Any, *, title: str = "", ax: Any = None) -> Any:
+    """Log error against log run time, one line per method; returns the axes.
+
+    Methods whose label starts with "lagjax" are drawn solid, others dashed.
+    """
+    import matplotlib.pyplot as plt
+
+    if ax is None:
+        ax = plt.subplots(figsize=(7.5, 5))[1]
+    for method in dict.fromkeys(point.method for point in points):
+        line = sorted(
+            (p.run_seconds, p.error)
+            for p in points
+            if p.method == method and p.error > 0 and math.isfinite(p.run_seconds)
+        )
+        if line:
+            style = "-o" if method.startswith("lagjax") else "--s"
+            ax.loglog(*zip(*line), style, label=method, markersize=4)
+    ax.set_xlabel("run time [s] (median of warm runs, compile excluded)")
+    ax.set_ylabel("relative error of the final (q, q̇)")
+    ax.set_title(title)
+    ax.grid(True, which="major", alpha=0.3)
+    ax.legend(fontsize=7, loc="best")
+    return ax

@@ -31,6 +31,7 @@ import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .fixed_step import integrate_fixed_steps
 from .mechanics.hamiltonian import AbstractHamiltonian, SeparableHamiltonian
@@ -130,6 +131,12 @@ def _terms_and_state(system: MechanicalSystem, solver, y0, t0, args):
                 f"{type(solver).__name__} discretizes a Lagrangian; got "
                 f"{type(system).__name__}. Use .to_lagrangian() or another solver."
             )
+        if system.force is not None or system.dissipation is not None:
+            raise ValueError(
+                f"{type(solver).__name__} discretizes the conservative action only; "
+                "this Lagrangian has a force or dissipation. Use GaussLegendre or an "
+                "adaptive solver."
+            )
         q0, qdot0 = y0
         state0 = (q0, system.momentum(q0, qdot0, t0, args))
         return LagrangianTerm(system), state0, system.to_hamiltonian()
@@ -173,6 +180,18 @@ def _stepping(solver, t0, t1, dt, rtol, atol):
             "step: pass dt."
         )
     return diffrax.PIDController(rtol=rtol, atol=atol), None
+
+
+def _as_python_number(x: Any) -> Any:
+    """A concrete NumPy/JAX scalar as a Python float (traced values are kept)."""
+    if isinstance(x, (np.generic, np.ndarray)) and np.ndim(x) == 0:
+        return float(x)
+    if isinstance(x, jax.Array) and x.ndim == 0:
+        try:
+            return float(x)
+        except jax.errors.ConcretizationTypeError:  # traced: keep it traced
+            return x
+    return x
 
 
 def _check_times(t0, t1, dt):
@@ -232,6 +251,7 @@ def simulate(
       state). With False the trajectory up to the failure is returned and
       `result`/`stats["finite"]` say what happened.
     """
+    t0, t1, dt = (_as_python_number(x) for x in (t0, t1, dt))
     _check_times(t0, t1, dt)
     if isinstance(system, AbstractScene):
         # A scene's parameters are its fields; its physics reads them from args.

@@ -234,3 +234,24 @@ def test_save_at_every_step_is_not_mistaken_for_a_failure():
     assert np.allclose(
         np.asarray(traj.q)[used], np.cos(OMEGA * np.asarray(traj.ts)[used]), atol=1e-6
     )
+
+
+def test_numpy_and_jax_scalar_times_and_variational_refusal():
+    system = oscillator_hamiltonian()
+    for t1, dt in [(np.float64(1.0), np.float64(0.01)), (jnp.asarray(1.0), 0.01)]:
+        traj = lj.simulate(system, (1.0, 0.0), t1=t1, dt=dt, args=OMEGA)
+        assert np.isclose(traj.q[-1], np.cos(OMEGA), atol=1e-8)
+    # Traced times still work (inside jit, dt and t1 as arguments).
+    traced = jax.jit(
+        lambda t1: lj.simulate(
+            system, (1.0, 0.0), t1=t1, dt=0.01, args=OMEGA, max_steps=200
+        ).q[-1]
+    )
+    assert np.isclose(traced(1.0), np.cos(OMEGA), atol=1e-6)
+    damped = lj.Lagrangian(
+        lambda x, v: 0.5 * v**2 - 0.5 * x**2, dissipation=lambda v: v**2
+    )
+    with pytest.raises(ValueError, match="conservative action"):
+        lj.simulate(
+            damped, (1.0, 0.0), t1=1.0, dt=0.01, solver=lj.VariationalMidpoint()
+        )

@@ -1,0 +1,191 @@
+"""The benchmark scripts in their CI-sized `--quick` mode: they run, and their numbers
+are sane.
+
+Both scripts run as subprocesses, side by side, into a temporary folder. Then the
+physics is checked on what they wrote: a convergent method's error falls as its
+step count grows, at its order; the same equations reached by different routes
+(lagjax, hand-written diffrax, scipy, SymPy) agree; an implicit L-stable method
+beats explicit ones on a stiff problem; singular problems are refused with a reason.
+"""
+
+import csv
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lagjax import diagnostics
+
+ROOT = Path(__file__).resolve().parent.parent
+SCRIPTS = ("work_precision.py", "stability.py")
+
+
+@pytest.fixture(scope="module")
+def results(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("bench")
+    runs = [
+        subprocess.Popen(
+            [
+                sys.executable,
+                str(ROOT / "benchmarks" / name),
+                "--quick",
+                "--out",
+                str(out),
+            ],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
+        for name in SCRIPTS
+    ]
+    for name, run in zip(SCRIPTS, runs):
+        output, _ = run.communicate(timeout=300)
+        assert run.returncode == 0, f"{name} failed:\n{output[-3000:]}"
+    return out
+
+
+def _rows(path: Path) -> list[dict]:
+    with open(path) as handle:
+        rows = list(csv.DictReader(handle))
+    assert rows, f"{path.name} is empty"
+    return rows
+
+
+def _number(row: dict, key: str) -> float:
+    return float(row[key])
+
+
+def test_every_output_file_is_written(results):
+    for name in (
+        "work_precision.csv", "report.json", "summary.md", "scaling.csv",
+        "throughput.csv", "scaling.png", "wp_kepler.png", "wp_double_pendulum.png",
+        "stability.csv", "stability.json",
+    ):  # fmt: skip
+        assert (results / name).stat().st_size > 0, name
+    for image in results.glob("*.png"):
+        assert image.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+        assert image.stat().st_size > 10_000  # axes, lines and labels, not a blank
+    report = json.loads((results / "report.json").read_text())
+    assert report["meta"]["mode"] == "quick"
+    assert {"work_precision", "scaling", "throughput"} <= set(report)
+
+
+def test_work_precision_points_are_sane(results):
+    for row in _rows(results / "work_precision.csv"):
+        assert row["outcome"] == "ok", row
+        assert _number(row, "run_s") > 0 and _number(row, "compile_s") >= 0
+        assert 0 < _number(row, "error") < 10, row
+        assert 0 <= _number(row, "energy_error") < 1, row
+
+
+def _line(rows: list[dict], scene: str, method: str) -> tuple[np.ndarray, np.ndarray]:
+    """(settings, errors) of one method on one scene, in sweep order."""
+    picked = [r for r in rows if r["scene"] == scene and r["method"] == method]
+    assert len(picked) >= 2, (scene, method)
+    return (
+        np.array([_number(r, "value") for r in picked]),
+        np.array([_number(r, "error") for r in picked]),
+    )
+
+
+def test_errors_fall_with_cost_at_the_method_order(results):
+    rows = _rows(results / "work_precision.csv")
+    steps, errors = _line(rows, "kepler", "lagjax StormerVerlet")
+    order = diagnostics.convergence_order(1 / steps, errors)
+    assert abs(order - 2) < 0.3, (steps, errors)
+    for scene in ("kepler", "double_pendulum"):
+        methods = {r["method"] for r in rows if r["scene"] == scene}
+        for method in methods:
+            settings, errors = _line(rows, scene, method)
+            finer = (
+                np.argsort(settings)[::-1]
+                if "rtol" in _kind(rows, method)
+                else np.argsort(settings)
+            )
+            assert np.all(np.diff(errors[finer]) < 0), (scene, method, errors)
+
+
+def _kind(rows: list[dict], method: str) -> str:
+    return next(r["parameter"] for r in rows if r["method"] == method)
+
+
+def test_routes_to_the_same_equations_agree(results):
+    """At rtol 1e-8 the same Dopri8 tableau gives the same error, whoever wrote f."""
+    rows = _rows(results / "work_precision.csv")
+    at = {
+        r["method"]: _number(r, "error")
+        for r in rows
+        if r["scene"] == "double_pendulum" and _number(r, "value") == 1e-8
+    }
+    ours, hand = at["lagjax Dopri8"], at["diffrax Dopri8 (hand-written)"]
+    assert math.isclose(ours, hand, rel_tol=0.1), (ours, hand)
+    for method, error in at.items():  # scipy's DOP853 and the SymPy route too
+        assert error < 1e-4, (method, error)
+
+
+def test_summary_names_the_fastest_methods(results):
+    summary = (results / "summary.md").read_text()
+    assert "Kepler e = 0.6" in summary and "Double pendulum" in summary
+    table = [line for line in summary.splitlines() if "| 1e-03 |" in line]
+    assert len(table) == 2 and all("lagjax" in line for line in table)
+    assert "Batched throughput" in summary and "Scaling with system size" in summary
+
+
+def test_scaling_and_throughput_rows(results):
+    scaling = _rows(results / "scaling.csv")
+    lagjax = [r for r in scaling if r["route"] == "lagjax"]
+    assert {r["n"] for r in lagjax} >= {"1", "2", "100"}
+    for row in scaling:
+        assert _number(row, "build_s") >= 0 and _number(row, "run_s") > 0, row
+    if any(r["route"].startswith("SymPy") for r in scaling):
+        assert max(int(r["n"]) for r in scaling if r["route"].startswith("SymPy")) <= 2
+    throughput = _rows(results / "throughput.csv")
+    rate = {
+        (r["route"], int(r["batch"])): _number(r, "steps_per_s") for r in throughput
+    }
+    assert all(value > 0 for value in rate.values())
+    single, batched = (
+        rate[("lagjax (vmap of lj.simulate)", 1)],
+        rate[("lagjax (vmap of lj.simulate)", 64)],
+    )
+    assert batched > 0.5 * single  # vectorising never costs per trajectory-step
+
+
+def _stability(results: Path) -> dict[tuple[str, str], dict]:
+    rows = json.loads((results / "stability.json").read_text())
+    for row in rows:
+        assert row["outcome"] in ("accurate", "degraded", "refused"), row
+        if row["outcome"] == "refused":
+            assert row["reason"], row
+        else:
+            assert math.isfinite(row["error"]) and row["run_s"] > 0, row
+    return {(row["case"], row["method"]): row for row in rows}
+
+
+def test_implicit_method_wins_on_the_overdamped_oscillator(results):
+    rows = _stability(results)
+    mild = "overdamped oscillator ζ = 100"
+    implicit = rows[(mild, "Kvaerno5 (implicit, L-stable)")]
+    explicit = rows[(mild, "Tsit5 (explicit)")]
+    assert implicit["outcome"] == explicit["outcome"] == "accurate"
+    assert implicit["run_s"] < explicit["run_s"]
+    severe = "overdamped oscillator ζ = 10000"
+    assert rows[(severe, "Kvaerno5 (implicit, L-stable)")]["outcome"] == "accurate"
+    assert rows[(severe, "Tsit5 (explicit)")]["outcome"] != "accurate"
+
+
+def test_stiff_and_singular_problems_are_refused_not_garbage(results):
+    rows = _stability(results)
+    fpu = "stiff FPU chain, ω = 1000"
+    assert rows[(fpu, "StormerVerlet, h = 0.01")]["outcome"] != "accurate"  # hω = 10
+    assert rows[(fpu, "Tsit5")]["outcome"] == "accurate"
+    singular = [row for key, row in rows.items() if key[0] == "singular mass matrix"]
+    assert singular and all(row["outcome"] == "refused" for row in singular)
+    assert any("singular" in row["reason"] for row in singular)
+    lock = "free body near gimbal lock (Euler θ = 1e-6)"
+    assert rows[(lock, "Euler angles, Dopri8")]["outcome"] == "refused"
+    assert rows[(lock, "quaternion, RigidBodyYoshida4")]["outcome"] == "accurate"
