@@ -11,10 +11,12 @@ one chunk.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from typing import Any
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -53,6 +55,20 @@ def _take(tree: Any, start: int, stop: int) -> Any:
     return jax.tree_util.tree_map(lambda leaf: leaf[start:stop], tree)
 
 
+@eqx.filter_jit
+def _simulate_members(system, shared_args, simulate_kwargs, members):
+    """vmap of `simulate` over (y0, args) members; compiled once per configuration
+    (the system, solver and options are hashable Modules and numbers)."""
+
+    def one(member):
+        y0, args = member
+        return simulate(
+            system, y0, args=shared_args if args is None else args, **simulate_kwargs
+        )
+
+    return jax.vmap(one)(members)
+
+
 def sweep(
     system: System,
     y0s: Any,
@@ -85,17 +101,12 @@ def sweep(
     mesh = Mesh(np.array(devices), (_AXIS,))
     sharding = NamedSharding(mesh, PartitionSpec(_AXIS))
 
-    def one(member):
-        y0, args = member
-        return simulate(
-            system, y0, args=shared_args if args is None else args, **simulate_kwargs
-        )
-
-    run = jax.jit(jax.vmap(one), in_shardings=(sharding,), out_shardings=sharding)
+    run = functools.partial(_simulate_members, system, shared_args, simulate_kwargs)
     pieces = []
     for start in range(0, size, step):
         chunk = _take(batched, start, min(start + step, size))
         padded = _pad(chunk, step)
+        # The computation follows its input's sharding: one chunk per device.
         result = run(jax.device_put(padded, sharding))
         pieces.append(_take(result, 0, min(step, size - start)))
     if len(pieces) == 1:
