@@ -26,25 +26,10 @@ import jax.numpy as jnp  # noqa: E402
 
 import lagjax as lj  # noqa: E402
 
+# The textbook closed form (m = l = 1, g = 9.81), shared with the demo.
+from lagjax.demo import handwritten_acceleration  # noqa: E402
+
 G = 9.81
-
-
-def handwritten_acceleration(q, qd):
-    """Double pendulum, m1 = m2 = 1, l1 = l2 = 1 (textbook closed form)."""
-    t1, t2 = q[0], q[1]
-    w1, w2 = qd[0], qd[1]
-    delta = t1 - t2
-    den = 2.0 - jnp.cos(delta) ** 2
-    a1 = (
-        -jnp.sin(delta) * (w2**2 + w1**2 * jnp.cos(delta))
-        - G * (2.0 * jnp.sin(t1) - jnp.sin(t2) * jnp.cos(delta))
-    ) / den
-    a2 = (
-        2.0 * jnp.sin(delta) * w1**2
-        + jnp.sin(delta) * jnp.cos(delta) * w2**2
-        + 2.0 * G * (jnp.sin(t1) * jnp.cos(delta) - jnp.sin(t2))
-    ) / den
-    return jnp.stack([a1, a2])
 
 
 def lagrangian_indexed(q, qd):

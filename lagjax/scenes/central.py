@@ -32,7 +32,7 @@ import jax.numpy as jnp
 
 from lagjax.mechanics.hamiltonian import SeparableHamiltonian
 from lagjax.mechanics.lagrangian import Lagrangian
-from lagjax.scenes.base import AbstractScene
+from lagjax.scenes.base import AbstractScene, parameter
 
 # Newton's method on Kepler's equation started at 𝓔 = π converges monotonically for
 # mean anomalies in [0, π] (the equation is increasing and convex there); 50
@@ -183,24 +183,12 @@ class KeplerCartesian(AbstractKeplerProblem):
     Closed forms: see the module docstring (Goldstein §3.7–3.9).
     """
 
-    eccentricity: jax.Array
-    semi_major_axis: jax.Array
-    gravitational_parameter: jax.Array
-    mass: jax.Array
+    eccentricity: jax.Array = parameter(0.6)
+    semi_major_axis: jax.Array = parameter(1.0)
+    gravitational_parameter: jax.Array = parameter(1.0)
+    mass: jax.Array = parameter(1.0)
 
     state_kind: ClassVar[str] = "momentum"
-
-    def __init__(
-        self,
-        eccentricity=0.6,
-        semi_major_axis=1.0,
-        gravitational_parameter=1.0,
-        mass=1.0,
-    ):
-        self.eccentricity = jnp.asarray(eccentricity, dtype=float)
-        self.semi_major_axis = jnp.asarray(semi_major_axis, dtype=float)
-        self.gravitational_parameter = jnp.asarray(gravitational_parameter, dtype=float)
-        self.mass = jnp.asarray(mass, dtype=float)
 
     def system(self) -> SeparableHamiltonian:
         return SeparableHamiltonian(_cartesian_kinetic, _cartesian_potential)
@@ -232,24 +220,12 @@ class KeplerPolar(AbstractKeplerProblem):
     wrapped: it grows by 2π per orbit.
     """
 
-    eccentricity: jax.Array
-    semi_major_axis: jax.Array
-    gravitational_parameter: jax.Array
-    mass: jax.Array
+    eccentricity: jax.Array = parameter(0.6)
+    semi_major_axis: jax.Array = parameter(1.0)
+    gravitational_parameter: jax.Array = parameter(1.0)
+    mass: jax.Array = parameter(1.0)
 
     state_kind: ClassVar[str] = "velocity"
-
-    def __init__(
-        self,
-        eccentricity=0.6,
-        semi_major_axis=1.0,
-        gravitational_parameter=1.0,
-        mass=1.0,
-    ):
-        self.eccentricity = jnp.asarray(eccentricity, dtype=float)
-        self.semi_major_axis = jnp.asarray(semi_major_axis, dtype=float)
-        self.gravitational_parameter = jnp.asarray(gravitational_parameter, dtype=float)
-        self.mass = jnp.asarray(mass, dtype=float)
 
     def system(self) -> Lagrangian:
         return Lagrangian(_polar_lagrangian, quadratic_in_velocity=True)
