@@ -26,18 +26,10 @@ import jax.numpy as jnp  # noqa: E402
 
 import lagjax as lj  # noqa: E402
 
-# The textbook closed form (m = l = 1, g = 9.81), shared with the demo.
-from lagjax.demo import handwritten_acceleration  # noqa: E402
-
-G = 9.81
-
-
-def lagrangian_indexed(q, qd):
-    t1, t2 = q[0], q[1]
-    w1, w2 = qd[0], qd[1]
-    kinetic = w1**2 + 0.5 * w2**2 + w1 * w2 * jnp.cos(t1 - t2)
-    potential = -G * (2.0 * jnp.cos(t1) + jnp.cos(t2))
-    return kinetic - potential
+# The demo's L, written with indexing (`q[0]`, `q[1]`), and the textbook closed form
+# of its equations of motion (m = l = 1, g = G = 9.81).
+from lagjax.demo import G, handwritten_acceleration  # noqa: E402
+from lagjax.demo import double_pendulum as lagrangian_indexed  # noqa: E402
 
 
 def lagrangian_matrix(q, qd):
@@ -88,7 +80,7 @@ def measure(fn, *inputs, repeats: int) -> tuple[float, float]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     parser.add_argument("--steps", type=int, default=10_000)
     parser.add_argument("--batch", type=int, default=1024)
     parser.add_argument("--repeats", type=int, default=5)

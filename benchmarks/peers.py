@@ -339,6 +339,26 @@ def scipy_run(route: NumpyRoute, t1: float, method: str, rtol: float):
     return run
 
 
+def lagranges_equations(
+    lagrangian: Callable[[Module, list, list], Any], size: int
+) -> tuple[Any, list, list]:
+    """SymPy's `LagrangesMethod` for L(sp, q, q̇), its equations formed.
+
+    Returns (method, [x, v], substitutions): plain symbols for q and q̇, to
+    lambdify with, and the substitutions that put them in place of q and q̇.
+    """
+    import sympy as sp
+    from sympy.physics.mechanics import LagrangesMethod, dynamicsymbols
+
+    q = list(dynamicsymbols(f"q1:{size + 1}"))
+    qd = [coordinate.diff(dynamicsymbols._t) for coordinate in q]
+    method = LagrangesMethod(lagrangian(sp, q, qd), q)
+    method.form_lagranges_equations()
+    x, v = sp.symbols(f"x0:{size}"), sp.symbols(f"v0:{size}")
+    plain = list(zip(qd, v)) + list(zip(q, x))  # derivatives first
+    return method, [x, v], plain
+
+
 def derive_with_sympy(
     lagrangian: Callable[[Module, list, list], Any], size: int
 ) -> tuple[Callable[[float, np.ndarray], np.ndarray], float]:
@@ -349,17 +369,12 @@ def derive_with_sympy(
     swells the expressions and takes far longer for more than two coordinates.
     """
     import sympy as sp
-    from sympy.physics.mechanics import LagrangesMethod, dynamicsymbols
+    import sympy.physics.mechanics  # loaded before the clock starts
 
     start = time.perf_counter()
-    q = list(dynamicsymbols(f"q1:{size + 1}"))
-    qd = [coordinate.diff(dynamicsymbols._t) for coordinate in q]
-    method = LagrangesMethod(lagrangian(sp, q, qd), q)
-    method.form_lagranges_equations()
-    x, v = sp.symbols(f"x0:{size}"), sp.symbols(f"v0:{size}")
-    plain = list(zip(qd, v)) + list(zip(q, x))  # derivatives first
-    mass = sp.lambdify([x, v], method.mass_matrix.subs(plain), "numpy")
-    forcing = sp.lambdify([x, v], method.forcing.subs(plain), "numpy")
+    method, symbols, plain = lagranges_equations(lagrangian, size)
+    mass = sp.lambdify(symbols, method.mass_matrix.subs(plain), "numpy")
+    forcing = sp.lambdify(symbols, method.forcing.subs(plain), "numpy")
     seconds = time.perf_counter() - start
 
     def rhs(t, y):

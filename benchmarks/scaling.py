@@ -18,6 +18,9 @@ steps per trajectory, batch 1 … 65536 in chunks of 4096 (memory stays bounded 
 chunk): `jax.vmap` of `lj.simulate` against `jax.vmap` of a hand-written
 `diffrax.diffeqsolve`. `lj.sweep` is timed as called (it compiles on every call).
 
+The size study is in `scaling_size.py`, the batch study in `scaling_throughput.py`;
+this file runs both and writes their CSV files, figure and summary.
+
     python benchmarks/scaling.py [--quick] [--out DIR]
 
 References: SymPy documentation, `sympy.physics.mechanics.LagrangesMethod`;
@@ -31,7 +34,6 @@ import csv
 import sys
 import time
 from pathlib import Path
-from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
@@ -39,266 +41,12 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import diffrax  # noqa: E402
-import jax.numpy as jnp  # noqa: E402
 import matplotlib  # noqa: E402
 
 matplotlib.use("Agg")  # files only, no display
 import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import peers  # noqa: E402
-
-import lagjax as lj  # noqa: E402
-from lagjax import diagnostics  # noqa: E402
-from lagjax.scenes.chains import FermiPastaUlamChain  # noqa: E402
-from lagjax.scenes.pendulums import DoublePendulum  # noqa: E402
-
-TOLERANCE = 1e-8
-PENDULUM_T1, CHAIN_T1 = 2.0, 10.0
-THROUGHPUT_STEPS, THROUGHPUT_DT, CHUNK = 200, 0.01, 4096
-ONCE = dict(repeats=1)  # for runs that take many seconds
-
-
-def n_link_pendulum_lagrangian(m: Any, q: Any, qd: Any, gravity: float = 9.81):
-    """n unit masses on n unit rods, angles from the downward vertical.
-
-    Written once for both backends: `m` is jax.numpy (lagjax) or sympy; `q`, `qd`
-    are indexed by link.
-    """
-    x_dot = y_dot = height = kinetic = potential = 0
-    for k in range(len(qd)):
-        x_dot = x_dot + m.cos(q[k]) * qd[k]
-        y_dot = y_dot + m.sin(q[k]) * qd[k]
-        height = height - m.cos(q[k])
-        kinetic = kinetic + (x_dot**2 + y_dot**2) / 2
-        potential = potential + gravity * height
-    return kinetic - potential
-
-
-def lagjax_row(system: Any, y0: Any, t1: float, args: Any, timing: dict) -> dict:
-    def run(y0):
-        trajectory = lj.simulate(
-            system, y0, t1=t1, solver=diffrax.Dopri8(), args=args,
-            rtol=TOLERANCE, atol=TOLERANCE, max_steps=10**6,
-        )  # fmt: skip
-        return trajectory.q[-1], trajectory.stats["num_steps"]
-
-    measured = diagnostics.time_run(run, y0, **timing)
-    return dict(
-        build_s=measured.compile_seconds,
-        run_s=measured.run_seconds,
-        steps=int(measured.output[1]),
-    )
-
-
-def scipy_row(route: peers.NumpyRoute, t1: float, timing: dict) -> dict:
-    from scipy.integrate import solve_ivp
-
-    def run():
-        return solve_ivp(
-            route.rhs, (0.0, t1), route.initial_state, method="DOP853",
-            rtol=TOLERANCE, atol=TOLERANCE,
-        )  # fmt: skip
-
-    measured = diagnostics.time_run(run, jit=False, warmup=0, **timing)
-    return dict(
-        build_s=route.derivation_seconds,
-        run_s=measured.run_seconds,
-        steps=len(measured.output.t) - 1,
-        evaluations=int(measured.output.nfev),
-    )
-
-
-def derive_symbolic_rhs(size: int) -> tuple[Any, float]:
-    """q̈ solved by SymPy (`LagrangesMethod.rhs`) and lambdified: (f, seconds)."""
-    import sympy as sp
-    from sympy.physics.mechanics import LagrangesMethod, dynamicsymbols
-
-    start = time.perf_counter()
-    q = list(dynamicsymbols(f"q1:{size + 1}"))
-    qd = [coordinate.diff(dynamicsymbols._t) for coordinate in q]
-    method = LagrangesMethod(n_link_pendulum_lagrangian(sp, q, qd), q)
-    method.form_lagranges_equations()
-    x, v = sp.symbols(f"x0:{size}"), sp.symbols(f"v0:{size}")
-    plain = list(zip(qd, v)) + list(zip(q, x))
-    rhs = sp.lambdify([x, v], method.rhs().subs(plain), "numpy")
-    return rhs, time.perf_counter() - start
-
-
-def _numpy_route(rhs: Any, start: np.ndarray, seconds: float) -> peers.NumpyRoute:
-    return peers.NumpyRoute(rhs, start, lambda xp, y: y, seconds)
-
-
-def measured_or_estimated(
-    route: peers.NumpyRoute, t1: float, like: dict, budget: float
-) -> dict:
-    """scipy DOP853 on `route`; or, when one evaluation (median of three) times the
-    evaluation count of `like` — the same equations at the same tolerance — exceeds
-    budget/4, that product, marked as an estimate."""
-    call = diagnostics.time_run(
-        route.rhs, 0.0, route.initial_state, jit=False, warmup=0, repeats=3
-    )
-    estimate = call.run_seconds * like["evaluations"]
-    if estimate >= budget / 4:
-        return dict(build_s=route.derivation_seconds, run_s=estimate,
-                    steps=like["steps"], estimated=True)  # fmt: skip
-    return dict(scipy_row(route, t1, ONCE), estimated=False)
-
-
-def symbolic_row(size: int, numeric: dict, budget: float) -> dict:
-    """SymPy solving for q̈ itself: its build time, and its run time."""
-    rhs, seconds = derive_symbolic_rhs(size)
-    start = np.concatenate([np.full(size, 0.5), np.zeros(size)])
-
-    def field(t, y):
-        return np.concatenate([y[size:], np.ravel(rhs(y[:size], y[size:]))[size:]])
-
-    route = _numpy_route(field, start, seconds)
-    return measured_or_estimated(route, PENDULUM_T1, numeric, budget)
-
-
-def _next_exceeds(times: list[float], budget: float) -> bool:
-    """Whether the next derivation, extrapolated geometrically, exceeds `budget`."""
-    if not times:
-        return False
-    growth = times[-1] / times[-2] if len(times) > 1 and times[-2] > 0 else 2.0
-    return times[-1] * max(growth, 1.0) > budget
-
-
-def pendulum_scaling(sizes: range, budget: float, timing: dict) -> list[dict]:
-    """lagjax and both SymPy variants for n-link pendulums of the given sizes."""
-    rows: list[dict] = []
-    built: dict[str, list[float]] = {"numeric": [], "symbolic": []}
-    for n in sizes:
-        lag = lj.Lagrangian(
-            lambda q, qd: n_link_pendulum_lagrangian(jnp, q, qd),
-            quadratic_in_velocity=True,
-        )
-        y0 = (jnp.full(n, 0.5), jnp.zeros(n))
-        rows.append(
-            dict(n=n, route="lagjax", **lagjax_row(lag, y0, PENDULUM_T1, None, timing))
-        )
-        if not (peers.have_sympy() and peers.have_scipy()):
-            continue
-        if _next_exceeds(built["numeric"], budget):
-            continue
-        rhs, seconds = peers.derive_with_sympy(n_link_pendulum_lagrangian, n)
-        start = np.concatenate([np.full(n, 0.5), np.zeros(n)])
-        numeric = scipy_row(_numpy_route(rhs, start, seconds), PENDULUM_T1, timing)
-        built["numeric"].append(seconds)
-        rows.append(dict(n=n, route="SymPy, numeric solve of M", **numeric))
-        if not _next_exceeds(built["symbolic"], budget):
-            symbolic = symbolic_row(n, numeric, budget)
-            built["symbolic"].append(symbolic["build_s"])
-            rows.append(dict(n=n, route="SymPy, symbolic rhs()", **symbolic))
-    for row in rows:
-        print(_row_line(dict(system=f"{row['n']}-link pendulum", **row)), flush=True)
-    return [dict(system=f"{row['n']}-link pendulum", **row) for row in rows]
-
-
-def _row_line(row: dict) -> str:
-    note = " (estimated)" if row.get("estimated") else ""
-    return (
-        f"  {row['system']:22s} {row['route']:28s} build {row['build_s']:7.2f} s, "
-        f"run {row['run_s']:9.2e} s{note}, steps {row['steps']}"
-    )
-
-
-def chain_scaling(timing: dict, with_sympy: bool, budget: float) -> list[dict]:
-    """A 100-particle FPU chain: lagjax, hand-written diffrax and (full mode) SymPy."""
-    chain = FermiPastaUlamChain(frequency=50.0, pairs=50)
-    system = dict(system="FPU chain, 100 particles", n=100)
-    rows = [
-        dict(
-            system,
-            route="lagjax",
-            **lagjax_row(chain, chain.initial_state(), CHAIN_T1, None, timing),
-        )
-    ]
-    peer = peers.fermi_pasta_ulam(chain)
-    final = peers.diffrax_final(peer, diffrax.Dopri8(), CHAIN_T1, TOLERANCE)
-    measured = diagnostics.time_run(final, jnp.asarray(peer.initial_state), **timing)
-    rows.append(dict(system, route="hand-written diffrax", build_s=measured.compile_seconds,
-                     run_s=measured.run_seconds, steps=-1))  # fmt: skip
-    if with_sympy and peers.have_sympy() and peers.have_scipy():
-        hand = scipy_row(peers.hand_written_numpy(peer), CHAIN_T1, timing)
-        rows.append(dict(system, route="scipy DOP853, hand-written numpy", **hand))
-        route = peers.sympy_numpy(peer)
-        sympy = measured_or_estimated(route, CHAIN_T1, hand, budget)
-        rows.append(dict(system, route="SymPy, numeric solve of M", **sympy))
-    for row in rows:
-        print(_row_line(row), flush=True)
-    return rows
-
-
-def _batched_starts(batch: int) -> tuple[jax.Array, jax.Array]:
-    """The scene's start with θ₁ spread by up to 10⁻³ rad across the batch."""
-    q0, qdot0 = DoublePendulum().initial_state()
-    spread = 1e-3 * jnp.linspace(-1.0, 1.0, batch)[:, None] * jnp.array([1.0, 0.0])
-    return q0 + spread, jnp.broadcast_to(qdot0, (batch, 2))
-
-
-def _chunked_rate(single: Any, starts: Any, batch: int, timing: dict) -> dict:
-    """Compile `vmap(single)` for one chunk, then time the whole batch chunk by chunk."""
-    size = min(batch, CHUNK)
-    chunks = [
-        jax.tree_util.tree_map(lambda x, k=k: x[k : k + size], starts)
-        for k in range(0, batch, size)
-    ]
-    began = time.perf_counter()
-    compiled = jax.jit(jax.vmap(single)).lower(chunks[0]).compile()
-    build = time.perf_counter() - began
-    measured = diagnostics.time_run(
-        lambda: [compiled(chunk) for chunk in chunks], jit=False, **timing
-    )
-    rate = batch * THROUGHPUT_STEPS / measured.run_seconds
-    return dict(build_s=build, run_s=measured.run_seconds, steps_per_s=rate)
-
-
-def throughput(batches: tuple[int, ...], sweep_batches: tuple[int, ...], timing: dict):
-    """Trajectory-steps per second of the double pendulum against the batch size."""
-    scene, t1 = DoublePendulum(), THROUGHPUT_STEPS * THROUGHPUT_DT
-    peer = peers.double_pendulum(scene)
-    term = diffrax.ODETerm(lambda t, y, args: peer.vector_field(jnp, y))
-
-    def ours(y0):
-        solver = diffrax.Tsit5()
-        return lj.simulate(scene, y0, t1=t1, dt=THROUGHPUT_DT, solver=solver).ys
-
-    def hand(y0):
-        return diffrax.diffeqsolve(
-            term, diffrax.Tsit5(), 0.0, t1, THROUGHPUT_DT, y0,
-            saveat=diffrax.SaveAt(t1=True), max_steps=THROUGHPUT_STEPS + 1,
-        ).ys  # fmt: skip
-
-    rows = []
-    for batch in batches:
-        q0, qdot0 = _batched_starts(batch)
-        for route, single, starts in (
-            ("lagjax (vmap of lj.simulate)", ours, (q0, qdot0)),
-            ("hand-written diffrax (vmap)", hand, jnp.concatenate([q0, qdot0], -1)),
-        ):
-            rows.append(
-                dict(
-                    batch=batch,
-                    route=route,
-                    **_chunked_rate(single, starts, batch, timing),
-                )
-            )
-    for batch in sweep_batches:  # lj.sweep as a user calls it: it compiles each time
-        starts = _batched_starts(batch)
-        measured = diagnostics.time_run(
-            lambda starts=starts: lj.sweep(scene, starts, t1=t1, dt=THROUGHPUT_DT,
-                                           solver=diffrax.Tsit5(), chunk_size=CHUNK).ys,
-            jit=False, warmup=0, repeats=1,
-        )  # fmt: skip
-        rate = batch * THROUGHPUT_STEPS / measured.run_seconds
-        rows.append(dict(batch=batch, route="lj.sweep (per call)", build_s=0.0,
-                         run_s=measured.run_seconds, steps_per_s=rate))  # fmt: skip
-    for row in rows:
-        print(f"  batch {row['batch']:6d} {row['route']:30s} {row['steps_per_s']:9.3g} "
-              f"trajectory-steps/s (run {row['run_s']:.2e} s)", flush=True)  # fmt: skip
-    return rows
+from scaling_size import TOLERANCE, chain_scaling, pendulum_scaling  # noqa: E402
+from scaling_throughput import THROUGHPUT_STEPS, throughput  # noqa: E402
 
 
 def _write_csv(path: Path, rows: list[dict]) -> None:
@@ -394,7 +142,7 @@ def run_all(out: Path, quick: bool, timing: dict, budget: float = 60.0) -> dict:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
     parser.add_argument("--sympy-budget", type=float, default=60.0)

@@ -39,15 +39,17 @@ def kepler_force(q):
     return -q / (r_squared * jnp.sqrt(r_squared))
 
 
-def diffrax_final_state(solver, steps, dt):
-    terms = (
-        diffrax.ODETerm(lambda t, p, args: p),
-        diffrax.ODETerm(lambda t, q, args: kepler_force(q)),
-    )
+# The hand-written terms (dq/dt = p, dp/dt = F(q)) for diffrax's splitting solvers.
+KEPLER_TERMS = (
+    diffrax.ODETerm(lambda t, p, args: p),
+    diffrax.ODETerm(lambda t, q, args: kepler_force(q)),
+)
 
+
+def diffrax_final_state(solver, steps, dt):
     def run(q0, p0):
         sol = diffrax.diffeqsolve(
-            terms,
+            KEPLER_TERMS,
             solver,
             0.0,
             steps * dt,
@@ -57,6 +59,7 @@ def diffrax_final_state(solver, steps, dt):
             stepsize_controller=diffrax.ConstantStepSize(),
             max_steps=steps,
         )
+        assert sol.ys is not None
         return sol.ys[0][-1], sol.ys[1][-1]
 
     return run
@@ -69,14 +72,10 @@ KEPLER = lj.SeparableHamiltonian(
 
 def fixed_step_final_state(solver, steps, dt):
     """lagjax's fixed-step scan path with the hand-written terms: loop overhead only."""
-    terms = (
-        diffrax.ODETerm(lambda t, p, args: p),
-        diffrax.ODETerm(lambda t, q, args: kepler_force(q)),
-    )
 
     def run(q0, p0):
         (q, p), _, _ = integrate_fixed_steps(
-            terms, solver, 0.0, steps * dt, dt, (q0, p0), None
+            KEPLER_TERMS, solver, 0.0, steps * dt, dt, (q0, p0), None
         )
         return q, p
 
@@ -189,7 +188,7 @@ def compare(solver, steps, batch, repeats):
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     parser.add_argument("--steps", type=int, default=100_000)
     parser.add_argument("--batch", type=int, default=1024)
     parser.add_argument("--repeats", type=int, default=5)
