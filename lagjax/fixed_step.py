@@ -46,21 +46,25 @@ def integrate_fixed_steps(
     dt: float,
     y0: Any,
     args: Any,
+    dtype: Any = float,
 ) -> tuple[Any, Any, int]:
     """Take fixed steps from t0 to t1; return `(y1, result, steps)`.
 
     `result` is the first unsuccessful diffrax `RESULTS` of any step (e.g. a failed
-    implicit solve), or `successful`. Steps after a failure still run — the scan
+    implicit solve), or `successful`. Times are formed in Python (double) precision
+    and handed to the solver in the state's `dtype`. Steps after a failure still run — the scan
     has a fixed length — but the state reported then is that of a failed run.
     """
     steps = fixed_step_count(t0, t1, dt)
     dt = math.copysign(abs(dt), t1 - t0)
-    state = solver.init(terms, t0, t0 + dt, y0, args)
+    state = solver.init(
+        terms, jnp.asarray(t0, dtype), jnp.asarray(t0 + dt, dtype), y0, args
+    )
 
     def one_step(carry, k):
         y, solver_state, result = carry
-        start = t0 + k * dt
-        end = jnp.where(k == steps - 1, t1, t0 + (k + 1) * dt)
+        start = (t0 + k * dt).astype(dtype)
+        end = jnp.where(k == steps - 1, t1, t0 + (k + 1) * dt).astype(dtype)
         y, _, _, solver_state, step_result = solver.step(
             terms, start, end, y, args, solver_state, False
         )

@@ -36,6 +36,7 @@ import numpy as np
 from .fixed_step import integrate_fixed_steps
 from .mechanics.hamiltonian import AbstractHamiltonian, SeparableHamiltonian
 from .mechanics.lagrangian import Lagrangian
+from .precision import cast_floats, working_dtype
 from .rigid.body import RigidBody
 from .rigid.term import RigidBodyTerm
 from .scenes.base import AbstractScene
@@ -256,6 +257,11 @@ def simulate(
     if isinstance(system, AbstractScene):
         # A scene's parameters are its fields; its physics reads them from args.
         system, args = system.system(), system
+    # The run works in y0's precision; float inputs follow it (lagjax.precision).
+    dtype = working_dtype(y0)
+    y0, system, args = cast_floats((y0, system, args), dtype)
+    if ts is not None:
+        ts = jnp.asarray(ts, dtype=dtype)
     if solver is None:
         solver = default_solver(system, dt)
     if _is_constrained(system):
@@ -273,11 +279,11 @@ def simulate(
     if scan_path:
         assert dt is not None
         y1, result, steps = integrate_fixed_steps(
-            terms, solver, t0, t1, dt, state0, args
+            terms, solver, t0, t1, dt, state0, args, dtype
         )
         if throw:
             y1 = result.error_if(y1, result != diffrax.RESULTS.successful)
-        saved_ts = jnp.asarray([t1], dtype=float)
+        saved_ts = jnp.asarray([t1], dtype=dtype)
         ys = jax.tree_util.tree_map(lambda x: jnp.asarray(x)[None], y1)
         counts = jnp.asarray(steps)
         stats = dict(
@@ -300,6 +306,7 @@ def simulate(
             saveat,
             adjoint,
             throw,
+            dtype,
         )
     finite = _all_saved_states_finite(saved_ts, ys)
     if throw:
@@ -355,11 +362,15 @@ def _diffeqsolve(
     saveat,
     adjoint,
     throw,
+    dtype,
 ):
     """The general path: `diffrax.diffeqsolve` with saving, adjoints, adaptivity."""
     controller, dt0 = _stepping(solver, t0, t1, dt, rtol, atol)
     if max_steps is None:
         max_steps = _fixed_step_count(t0, t1, dt) or 100_000
+    # diffrax promotes the state to the dtype of the times: give it the state's.
+    t0, t1 = jnp.asarray(t0, dtype=dtype), jnp.asarray(t1, dtype=dtype)
+    dt0 = None if dt0 is None else jnp.asarray(dt0, dtype=dtype)
     if saveat is None:
         saveat = diffrax.SaveAt(ts=ts) if ts is not None else diffrax.SaveAt(t1=True)
     solution = diffrax.diffeqsolve(

@@ -3,7 +3,8 @@
 `simulate` wraps these in `diffrax.ODETerm`. They are equinox Modules rather than
 closures on purpose: two fields of the same system compare equal and hash alike, so
 diffrax's and lagjax's compiled functions are reused across calls instead of being
-recompiled for every new closure.
+recompiled for every new closure. Each returns its derivative in the dtype of the
+state (`lagjax.precision`), so a float32 run stays float32.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import equinox as eqx
 
 from .mechanics.hamiltonian import AbstractHamiltonian, SeparableHamiltonian
 from .mechanics.lagrangian import Lagrangian
+from .precision import match_dtypes
 
 
 class LagrangianVectorField(eqx.Module):
@@ -25,7 +27,8 @@ class LagrangianVectorField(eqx.Module):
         q, qdot = y
         # No per-evaluation singularity branch in the hot loop: simulate checks the
         # saved states once (see `euler_lagrange_acceleration`'s `check`).
-        return qdot, self.system.acceleration(q, qdot, t, args, check=False)
+        qddot = self.system.acceleration(q, qdot, t, args, check=False)
+        return qdot, match_dtypes(qddot, qdot)
 
 
 class HamiltonVectorField(eqx.Module):
@@ -34,7 +37,7 @@ class HamiltonVectorField(eqx.Module):
     system: AbstractHamiltonian
 
     def __call__(self, t: Any, y: tuple[Any, Any], args: Any) -> tuple[Any, Any]:
-        return self.system.vector_field(y[0], y[1], t, args)
+        return match_dtypes(self.system.vector_field(y[0], y[1], t, args), y)
 
 
 class SeparableDrift(eqx.Module):
@@ -43,7 +46,7 @@ class SeparableDrift(eqx.Module):
     system: SeparableHamiltonian
 
     def __call__(self, t: Any, p: Any, args: Any) -> Any:
-        return self.system.velocity(None, p, t, args)
+        return match_dtypes(self.system.velocity(None, p, t, args), p)
 
 
 class SeparableKick(eqx.Module):
@@ -52,4 +55,4 @@ class SeparableKick(eqx.Module):
     system: SeparableHamiltonian
 
     def __call__(self, t: Any, q: Any, args: Any) -> Any:
-        return self.system.potential_force(q, t, args)
+        return match_dtypes(self.system.potential_force(q, t, args), q)

@@ -9,8 +9,16 @@ import pytest
 
 import lagjax as lj
 from lagjax.rigid import RigidBodyTerm, euler_zxz_to_rotation, quaternion_to_matrix
-from lagjax.scenes.rigid import SCENES, HeavySymmetricTop, TorqueFreeBody
-from lagjax.solvers.rigid import RigidBodyYoshida4
+from lagjax.scenes.rigid import (
+    DAY,
+    SCENES,
+    SIDEREAL_DAY,
+    EarthFreePrecession,
+    HeavySymmetricTop,
+    TorqueFreeBody,
+)
+from lagjax.solvers.rigid import QuaternionProjection, RigidBodyYoshida4
+from tests.helpers import relative_close
 
 SAMPLES = 1201
 
@@ -103,3 +111,35 @@ def test_scene_conventions():
         q0, qdot0 = scene.initial_state()
         assert jnp.shape(q0) == jnp.shape(qdot0) == (3,)
         assert np.isfinite(scene.system()(q0, qdot0, 0.0, scene))
+
+
+def test_earth_wobble_period_is_euler_s_305_sidereal_days():
+    """T = A/(C − A) sidereal days (course text eq. 4.47 with Earth's numbers)."""
+    earth = EarthFreePrecession()
+    expected = 305 * SIDEREAL_DAY / np.cos(1e-6)
+    assert relative_close(earth.euler_period(), expected, 1e-13)
+    assert 304 < float(earth.euler_period()) / DAY < 305  # ≈ 304.2 solar days
+
+
+def _earth_checks_within(earth, trajectory, period_tolerance):
+    checks = earth.checks(trajectory)
+    measured, expected = checks["wobble period (days)"]
+    assert relative_close(measured, expected, period_tolerance), (measured, expected)
+    assert relative_close(*checks["wobble angle"], 1e-5)
+    assert relative_close(*checks["angular momentum"], 1e-12)
+
+
+def test_earth_free_precession_two_ways():
+    """Over 400 days: Euler angles with the default GaussLegendre(2), h = 20 min
+    (ωh = 0.09, period to ~3e-5), and quaternions with Dopri8 (the body-frame
+    motion is a slow rotation of Π, integrated to round-off)."""
+    earth = EarthFreePrecession()
+    t1, ts = earth.default_t1, jnp.arange(0.0, earth.default_t1, 6 * 3600.0)
+    euler = lj.simulate(earth, earth.initial_state(), t1=t1, dt=earth.default_dt, ts=ts)
+    assert euler.solver_name == "GaussLegendre"
+    _earth_checks_within(earth, euler, 1e-4)
+    body = lj.simulate(
+        earth.rigid_body(), earth.initial_body_state(), t1=t1, ts=ts, args=earth,
+        solver=QuaternionProjection(diffrax.Dopri8()), rtol=1e-10, atol=1e-10,
+    )  # fmt: skip
+    _earth_checks_within(earth, body, 1e-12)

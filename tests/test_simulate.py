@@ -255,3 +255,15 @@ def test_numpy_and_jax_scalar_times_and_variational_refusal():
         lj.simulate(
             damped, (1.0, 0.0), t1=1.0, dt=0.01, solver=lj.VariationalMidpoint()
         )
+
+
+def test_saved_fixed_step_runs_get_their_exact_step_budget():
+    """10⁵ + 2·10⁴ fixed steps with saving: not cut off by the adaptive default 10⁵."""
+    oscillator = lj.SeparableHamiltonian(lambda p: 0.5 * p**2, lambda q: 0.5 * q**2)
+    t1, steps = 120.0, 120_000
+    trajectory = lj.simulate(
+        oscillator, (1.0, 0.0), t1=t1, dt=t1 / steps, solver=lj.StormerVerlet(),
+        ts=jnp.linspace(0.0, t1, 3),
+    )  # fmt: skip
+    assert int(trajectory.stats["num_steps"]) == steps
+    assert abs(float(trajectory.q[-1]) - np.cos(t1)) < 1e-5  # (h²/24)·t phase error

@@ -29,6 +29,8 @@ import jax.numpy as jnp
 import optimistix as optx
 from jax.flatten_util import ravel_pytree
 
+from lagjax.precision import newton_for
+
 from .linalg import raise_if_singular, solve_dense
 
 _NEWTON_RTOL = 1e-13
@@ -58,12 +60,15 @@ def invert_gradient(
     first = raise_if_singular(start - step, singular, what)
     if quadratic:
         return unravel(first)
-    solver = optx.Newton(rtol=_NEWTON_RTOL, atol=_NEWTON_ATOL)
+    solver = newton_for(first.dtype, _NEWTON_RTOL, _NEWTON_ATOL)
     solution = optx.root_find(residual, solver, first, max_steps=64)
     return unravel(solution.value)
 
 
 def tree_dot(x: Any, y: Any) -> jax.Array:
     """Σ x_i y_i over all leaves of two matching pytrees."""
-    products = jax.tree_util.tree_map(lambda a, b: jnp.sum(a * b), x, y)
-    return sum(jax.tree_util.tree_leaves(products), start=jnp.zeros(()))
+    products = jax.tree_util.tree_leaves(
+        jax.tree_util.tree_map(lambda a, b: jnp.sum(a * b), x, y)
+    )
+    # Started from the first term, not a float64 zero: the sum keeps the dtype.
+    return sum(products[1:], start=products[0]) if products else jnp.zeros(())

@@ -13,6 +13,8 @@ from typing import Any
 import diffrax
 import jax
 
+from lagjax.precision import match_dtypes
+
 from .body import RigidBody
 
 
@@ -23,7 +25,8 @@ class RigidBodyTerm(diffrax.AbstractTerm):
 
     def vf(self, t, y, args):
         quaternion, body_momentum = y
-        return self.body.vector_field(quaternion, body_momentum, t, args)
+        rates = self.body.vector_field(quaternion, body_momentum, t, args)
+        return match_dtypes(rates, y)
 
     def contr(self, t0, t1, **kwargs):
         del kwargs

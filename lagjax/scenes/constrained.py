@@ -255,7 +255,7 @@ def _disk_motion(q, qdot, scene):
     centre_velocity = jax.jvp(lambda c: _disk_centre(c, scene), (q,), (qdot,))[1]
     along, axis, _ = _disk_frame(q)
     tilt_rate, heading_rate, spin_rate = qdot[2], qdot[3], qdot[4]
-    vertical = jnp.array([0.0, 0.0, 1.0])
+    vertical = jnp.array([0.0, 0.0, 1.0], dtype=qdot.dtype)
     omega = heading_rate * vertical + tilt_rate * along + spin_rate * axis
     return centre_velocity, omega
 

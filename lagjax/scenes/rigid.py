@@ -1,4 +1,4 @@
-r"""Rigid-body scenes: the torque-free body and the heavy symmetric top.
+r"""Rigid-body scenes: the torque-free body, the heavy top, the Earth's free wobble.
 
 Each scene gives its physics two ways that must agree:
 
@@ -37,7 +37,7 @@ from lagjax.rigid.heavy_top import nutation_bounds
 from lagjax.rigid.quaternion import quaternion_to_matrix
 from lagjax.signals import zero_crossing_times
 
-from .base import AbstractScene
+from .base import AbstractScene, parameter
 
 
 def euler_rates_from_body_omega(angles: jax.Array, omega_body: jax.Array) -> jax.Array:
@@ -261,4 +261,109 @@ class HeavySymmetricTop(AbstractScene):
         }
 
 
-SCENES = (TorqueFreeBody, HeavySymmetricTop)
+SIDEREAL_DAY = 86164.0905  # s
+DAY = 86400.0  # s
+
+
+class EarthFreePrecession(AbstractScene):
+    r"""The Earth as a rigid oblate body: its spin axis wobbles about the figure axis.
+
+    The torque-free symmetric body of the course text §4.7 with Earth's numbers:
+    $I_1 = I_2 = A$, $I_3 = C$, $(C - A)/A pprox 1/305$, spin $\omega_3 =
+    2\pi/$sidereal day. If the rotation axis is off the figure axis by a small
+    angle α, $oldsymbol\omega$ circles the figure axis in the body frame at
+
+    $$ \Omega = rac{C - A}{A}\,\omega_3, \qquad
+       T = rac{2\pi}{\Omega} = rac{A}{C - A}\ 	ext{sidereal days}
+       pprox 305\ 	ext{days} $$
+
+    (eq. 4.47 with $I_1 > I_3$ reversed: an oblate body precesses *with* the spin),
+    keeping α constant. This is Euler's free nutation. The wobble the Earth shows —
+    Chandler's, about 0.2″ wide — has a period of ≈ 433 days instead: the real Earth
+    yields elastically and has oceans (Newcomb 1891), which a rigid body cannot
+    show. The run measures the rigid body's 305 days.
+
+    Moments are in units of A (the motion depends on ratios only); time is in
+    seconds. `system()` is the Euler-angle Lagrangian, started with the figure axis
+    horizontal (θ = π/2) so it is far from gimbal lock; `rigid_body()` with
+    `initial_body_state()` is the same motion on quaternions.
+
+    **Parameters:** `ellipticity` $(C - A)/A$ (1/305), `spin` ω (rad/s,
+    2π/86164.09 s), `wobble` α, the angle between ω and the figure axis (rad,
+    10⁻⁶ ≈ 0.2″, about 6 m at the pole).
+
+    References: the course text §4.7 (eqs. 4.47–4.52); Goldstein, Poole & Safko,
+    *Classical Mechanics*, 3rd ed., §5.6 (the Earth's free precession, ~10 months);
+    Lambeck, *The Earth's Variable Rotation*, Cambridge (1980), ch. 3 (Chandler
+    wobble); Newcomb, Mon. Not. R. Astron. Soc. 52, 336 (1892).
+    """
+
+    ellipticity: jax.Array = parameter(1 / 305)
+    spin: jax.Array = parameter(2 * math.pi / SIDEREAL_DAY)
+    wobble: jax.Array = parameter(1e-6)
+
+    default_t1: ClassVar[float] = 400 * DAY
+    default_dt: ClassVar[float] = 1200.0
+    state_kind: ClassVar[str] = "velocity"
+
+    def body(self) -> TorqueFreeBody:
+        """The same motion as a `TorqueFreeBody` (moments in units of A)."""
+        omega = self.spin * jnp.stack(
+            [jnp.sin(self.wobble), 0 * self.wobble, jnp.cos(self.wobble)]
+        )
+        return TorqueFreeBody(
+            moments=jnp.stack([1 + 0 * self.ellipticity, 1 + 0 * self.ellipticity,
+                               1 + self.ellipticity]),
+            omega0=omega,
+            angles0=jnp.stack([0 * self.spin, math.pi / 2 + 0 * self.spin, 0 * self.spin]),
+        )  # fmt: skip
+
+    def system(self) -> Lagrangian:
+        return Lagrangian(_earth_lagrangian, quadratic_in_velocity=True)
+
+    def initial_state(self) -> tuple[jax.Array, jax.Array]:
+        return self.body().initial_state()
+
+    def rigid_body(self) -> RigidBody:
+        return RigidBody(self.body().moments)
+
+    def initial_body_state(self) -> tuple[jax.Array, jax.Array]:
+        return self.body().initial_body_state()
+
+    def euler_period(self) -> jax.Array:
+        """T = 2π/Ω, Ω = (C − A)/A · ω₃ (s)."""
+        omega_3 = self.spin * jnp.cos(self.wobble)
+        return 2 * math.pi / (self.ellipticity * omega_3)
+
+    def checks(self, trajectory: Any) -> dict[str, tuple[jax.Array, jax.Array]]:
+        """The wobble period (days) from ω₁'s sign changes in the body frame, the
+        constant wobble angle and the space angular momentum."""
+        moments = self.body().moments
+        rotation, omega = _body_motion(trajectory, moments)
+        # ω₁ starts at its maximum: it crosses zero at T/4 and 3T/4.
+        omega_1_rate = (
+            (moments[1] - moments[2]) * omega[:, 1] * omega[:, 2] / moments[0]
+        )
+        first, second = zero_crossing_times(trajectory.ts, omega[:, 0], omega_1_rate, 2)
+        transverse = jnp.hypot(omega[:, 0], omega[:, 1])
+        wobble = jnp.arctan2(transverse, omega[:, 2])
+        space_momentum = jnp.einsum("tij,tj->ti", rotation, moments * omega)
+        expected_momentum = self.body().angular_momentum_space()
+        return {
+            "wobble period (days)": (
+                2 * (second - first) / DAY,
+                self.euler_period() / DAY,
+            ),
+            "wobble angle": (wobble, jnp.full_like(wobble, self.wobble)),
+            "angular momentum": (
+                space_momentum,
+                jnp.broadcast_to(expected_momentum, space_momentum.shape),
+            ),
+        }
+
+
+def _earth_lagrangian(q, qdot, t, scene):
+    return _free_body_lagrangian(q, qdot, t, scene.body())
+
+
+SCENES = (TorqueFreeBody, HeavySymmetricTop, EarthFreePrecession)

@@ -16,6 +16,8 @@ from typing import Any
 import diffrax
 import equinox as eqx
 
+from lagjax.precision import match_dtypes
+
 
 class AbstractProjectedSolver(diffrax.AbstractWrappedSolver):
     """Delegates to `solver` and projects each step's end state with `project`."""
@@ -50,6 +52,7 @@ class AbstractProjectedSolver(diffrax.AbstractWrappedSolver):
             terms, t0, t1, y0, args, solver_state, made_jump
         )
         y1, projection_result = self.project(terms, t1, y1, args)
+        y1 = match_dtypes(y1, y0)  # a float64 constant in g must not widen the state
         result = diffrax.RESULTS.where(
             result == diffrax.RESULTS.successful, projection_result, result
         )

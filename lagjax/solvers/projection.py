@@ -35,6 +35,7 @@ from jax.flatten_util import ravel_pytree
 from lagjax.mechanics.constraints import least_correction, raise_if_rank_deficient
 from lagjax.mechanics.lagrangian import Lagrangian
 from lagjax.mechanics.linalg import solve_dense
+from lagjax.precision import match_dtypes, newton_for
 from lagjax.solvers.projected import AbstractProjectedSolver
 
 
@@ -49,7 +50,8 @@ class ConstrainedLagrangianTerm(diffrax.AbstractTerm):
 
     def vf(self, t, y, args):
         q, qdot = y
-        return qdot, self.lagrangian.acceleration(q, qdot, t, args, check=False)
+        qddot = self.lagrangian.acceleration(q, qdot, t, args, check=False)
+        return qdot, match_dtypes(qddot, qdot)
 
     def contr(self, t0, t1, **kwargs):
         del kwargs
@@ -129,7 +131,7 @@ def project_onto_constraints(
     Raises a run-time error when the constraint Jacobian is rank-deficient there.
     Returns the projected state and whether the position Newton solve converged.
     """
-    newton = optx.Newton(rtol=rtol, atol=atol)
+    newton = newton_for(ravel_pytree(q)[0].dtype, rtol, atol)
     q, result = _project_positions(lagrangian, q, qdot, t, args, newton, max_steps)
     qdot, singular = _project_velocities(lagrangian, q, qdot, t, args)
     # A rank-deficient G can also make the Newton solve return NaN, which the

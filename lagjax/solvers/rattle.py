@@ -47,6 +47,7 @@ from lagjax.mechanics.linalg import (
     solve_dense,
     solve_unrolled,
 )
+from lagjax.precision import newton_for
 from lagjax.solvers.compensated import compensated_add, zero_compensation
 from lagjax.solvers.projection import unwrap_constrained_term
 
@@ -221,7 +222,7 @@ class Rattle(diffrax.AbstractSolver[_RattleState]):
 
         newton = optx.root_find(
             defect,
-            optx.Newton(rtol=self.rtol, atol=self.atol),
+            newton_for(guess.dtype, self.rtol, self.atol),
             guess,
             max_steps=self.max_newton_steps,
             throw=False,

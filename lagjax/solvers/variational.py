@@ -34,6 +34,7 @@ import optimistix as optx
 from jax.flatten_util import ravel_pytree
 
 from lagjax.mechanics.lagrangian import Lagrangian
+from lagjax.precision import newton_for
 from lagjax.solvers.compensated import compensated_add, zero_compensation
 
 
@@ -143,7 +144,7 @@ class VariationalMidpoint(diffrax.AbstractSolver):
         guess = h * ravel_pytree(velocity)[0]
         solution = optx.root_find(
             residual,
-            optx.Newton(rtol=self.rtol, atol=self.atol),
+            newton_for(guess.dtype, self.rtol, self.atol),
             guess,
             max_steps=self.max_newton_steps,
             throw=False,
