@@ -19,7 +19,7 @@ Wanner, *Geometric Numerical Integration*, 2nd ed., Springer (2006), §VIII.5
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, TypeVar
 
 import jax
 import jax.numpy as jnp
@@ -50,7 +50,10 @@ def _is_float_array(x: Any) -> bool:
     )
 
 
-def cast_floats(tree: Any, dtype: Any) -> Any:
+Tree = TypeVar("Tree")
+
+
+def cast_floats(tree: Tree, dtype: Any) -> Tree:
     """`tree` with every floating array leaf cast to `dtype` (others untouched).
 
     Works on any pytree, equinox Modules included (a scene, a `RigidBody`): their

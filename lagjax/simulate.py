@@ -259,7 +259,11 @@ def simulate(
         system, args = system.system(), system
     # The run works in y0's precision; float inputs follow it (lagjax.precision).
     dtype = working_dtype(y0)
-    y0, system, args = cast_floats((y0, system, args), dtype)
+    y0, system, args = (
+        cast_floats(y0, dtype),
+        cast_floats(system, dtype),
+        cast_floats(args, dtype),
+    )
     if ts is not None:
         ts = jnp.asarray(ts, dtype=dtype)
     if solver is None:

@@ -71,4 +71,6 @@ def tree_dot(x: Any, y: Any) -> jax.Array:
         jax.tree_util.tree_map(lambda a, b: jnp.sum(a * b), x, y)
     )
     # Started from the first term, not a float64 zero: the sum keeps the dtype.
-    return sum(products[1:], start=products[0]) if products else jnp.zeros(())
+    return (
+        jnp.asarray(sum(products[1:], start=products[0])) if products else jnp.zeros(())
+    )
