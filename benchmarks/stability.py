@@ -3,25 +3,42 @@ r"""Stability suite: stiff and extreme problems, and what each method makes of t
 Every attempt ends in one of three outcomes, judged by physics — an exact solution
 where there is one, otherwise a float64 reference (Dopri8 at rtol = 10⁻¹²):
 
-- **accurate**: the relative error of the final (q, q̇) is within the case's bound;
-- **degraded**: the run finished with a finite state beyond that bound;
-- **refused**: lagjax (or diffrax) raised an error — its one-line reason is shown,
-  so the table also says whether that reason is clear.
+- **accurate**: the case's measured error is within its bound (for most cases the
+  relative error of the final (q, q̇));
+- **degraded**: the run finished with a finite result beyond that bound;
+- **refused**: lagjax (or diffrax) raised an error, or the result was not finite —
+  its one-line reason is shown, so the table also says whether that reason is clear.
 
-Cases: the stiff Fermi–Pasta–Ulam chain at ω = 50, 10³ and 10⁴; a heavily
-overdamped oscillator (ζ = 10² and 10⁴, where the implicit Kvaerno5 must beat the
-explicit methods); a pendulum on a stiff spring; a pendulum released at 179.9°
-(compared with itself one exact period later); a Kepler orbit with e = 0.99; and
-singular or near-singular mass matrices (a degenerate Lagrangian, a free body in
+Cases (`stability_stiff.py`): the stiff Fermi–Pasta–Ulam chain at ω = 50, 10³ and
+10⁴; a heavily overdamped oscillator (ζ = 10² and 10⁴, where the implicit Kvaerno5
+must beat the explicit methods); a pendulum on a stiff spring; a pendulum released at
+179.9° (compared with itself one exact period later); a Kepler orbit with e = 0.99;
+and singular or near-singular mass matrices (a degenerate Lagrangian, a free body in
 Euler angles next to gimbal lock — with the quaternion route as the remedy).
 
+Extreme cases: a Kepler orbit with e = 0.999 against Kepler's equation (periapsis
+speed 45× the circular speed); a pendulum 10⁻⁹ below the separatrix, back at its
+turning point after one exact period, and the AGM period it relies on checked against
+the series at m → 1; a Foucault pendulum whose precession (Ω = 7·10⁻⁵ rad/s) is
+measured over thousands of swings at 1 rad/s (`stability_extreme.py`). Round-off
+over 10⁶ periods of a harmonic oscillator — the growth exponent of the splitting
+methods' energy error, with and without compensated summation, against Brouwer's ½
+(`stability_brouwer.py`). The chaotic double pendulum's finite-time Lyapunov
+exponent by tangent propagation (`jax.jvp` through `lj.simulate`) per method, and by
+two nearby trajectories (`stability_lyapunov.py`).
+
+Every row has the same keys (`stability_engine.ROW_KEYS`); `measure` says in words
+what a case measured where the error alone does not (a rate, an exponent).
+`--quick` runs a subset and skips the energy-error runs (`energy` is NaN there).
 Prints the table and writes `stability.csv` and `stability.json` to `--out`.
 
     python benchmarks/stability.py [--quick] [--out DIR]
 
 References: Hairer & Wanner, *Solving Ordinary Differential Equations II*, 2nd ed.,
 Springer 1996, §IV.1–IV.3 (stiffness, A- and L-stability); Hairer, Lubich & Wanner,
-*Geometric Numerical Integration*, §XIII (highly oscillatory problems, FPU).
+*Geometric Numerical Integration*, 2nd ed., Springer 2006, §XIII (highly oscillatory
+problems, FPU) and §VIII.5 (round-off, Brouwer's law); Benettin, Galgani, Giorgilli &
+Strelcyn, Meccanica 15, 9 (1980) (Lyapunov exponents by tangent maps).
 """
 
 from __future__ import annotations
@@ -29,331 +46,66 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-import math
 import sys
-from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # the stability_* modules
 
 import jax
 
 jax.config.update("jax_enable_x64", True)
 
-import diffrax  # noqa: E402
-import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
-import optimistix as optx  # noqa: E402
-
-import lagjax as lj  # noqa: E402
-from lagjax import diagnostics  # noqa: E402
-from lagjax.rigid import quaternion_to_matrix  # noqa: E402
-from lagjax.rigid.euler_angles import (  # noqa: E402
-    euler_zxz_body_angular_velocity,
-    euler_zxz_to_rotation,
+from stability_brouwer import brouwer_study  # noqa: E402
+from stability_engine import ROW_KEYS, Case, Study  # noqa: E402
+from stability_extreme import (  # noqa: E402
+    PeriodCheck,
+    foucault_study,
+    near_collision_kepler_case,
+    separatrix_pendulum_case,
 )
-from lagjax.scenes.central import KeplerCartesian  # noqa: E402
-from lagjax.scenes.chains import FermiPastaUlamChain  # noqa: E402
-from lagjax.scenes.pendulums import SimplePendulum  # noqa: E402
-from lagjax.scenes.rigid import TorqueFreeBody  # noqa: E402
-from lagjax.solvers.rigid import RigidBodyYoshida4  # noqa: E402
-
-ENERGY_SAMPLES = 100  # stratified random save times (diagnostics.sample_times)
-# Gauss–Legendre's default fixed-point stage solver needs h·Lip(f) < 1; Newton does
-# not (its residual test is absolute, so atol sits above the round-off, see
-# lagjax.solvers.implicit.GaussLegendre).
-NEWTON = optx.Newton(rtol=1e-12, atol=1e-12)
-
-
-@dataclass(frozen=True)
-class Attempt:
-    """One method on one case: `steps` fixed steps, or adaptive at `rtol` = atol."""
-
-    label: str
-    solver: Any
-    steps: int | None = None
-    rtol: float = 1e-8
-    max_steps: int | None = None
-    route: Callable[[], jax.Array] | None = None  # a final state by other means
-    in_quick: bool = True  # part of the CI-sized subset
+from stability_lyapunov import lyapunov_study  # noqa: E402
+from stability_stiff import (  # noqa: E402
+    eccentric_kepler_case,
+    fpu_case,
+    gimbal_lock_case,
+    near_separatrix_case,
+    overdamped_case,
+    singular_case,
+    spring_pendulum_case,
+)
 
 
-@dataclass
-class Case:
-    """A problem, the final state it must reach, and how close counts as accurate."""
-
-    name: str
-    system: Any
-    y0: Any
-    t1: float
-    attempts: list[Attempt]
-    tolerance: float
-    expected: Any = None  # final comparable state (or a function giving it)
-    args: Any = None
-    comparable: Callable[[Any, Any], jax.Array] = field(
-        default=lambda q, qdot: jnp.concatenate([jnp.ravel(q), jnp.ravel(qdot)])
-    )
-    conservative: bool = True
-
-
-def _simulate(case: Case, attempt: Attempt, y0: Any, ts: Any = None):
-    dt = None if attempt.steps is None else case.t1 / attempt.steps
-    max_steps = attempt.max_steps
-    if ts is not None and max_steps is None:
-        max_steps = (attempt.steps or 10**5) + 2
-    return lj.simulate(
-        case.system, y0, t1=case.t1, dt=dt, solver=attempt.solver, args=case.args,
-        rtol=attempt.rtol, atol=attempt.rtol, max_steps=max_steps, ts=ts,
-    )  # fmt: skip
-
-
-def reference(case: Case) -> np.ndarray:
-    if callable(case.expected):
-        return np.asarray(jax.jit(case.expected)())
-    if case.expected is not None:
-        return np.asarray(case.expected)
-    tight = Attempt("reference", diffrax.Dopri8(), rtol=1e-12, max_steps=10**7)
-    final = jax.jit(lambda y0: _final(case, tight, y0))(case.y0)
-    return np.asarray(final)
-
-
-def _final(case: Case, attempt: Attempt, y0: Any) -> jax.Array:
-    trajectory = _simulate(case, attempt, y0)
-    return case.comparable(trajectory.q[-1], trajectory.qdot[-1])
-
-
-def energy_error(case: Case, attempt: Attempt) -> float:
-    """Max relative energy error along an untimed run saved on the step grid."""
-    if not case.conservative or attempt.route is not None:
-        return math.nan
-    dt = None if attempt.steps is None else case.t1 / attempt.steps
-    ts = diagnostics.sample_times(0.0, case.t1, ENERGY_SAMPLES, dt)
-    trajectory = _simulate(case, attempt, case.y0, jnp.asarray(ts))
-    return float(diagnostics.energy_error(trajectory))
-
-
-def run_attempt(case: Case, attempt: Attempt, expected: np.ndarray, timing) -> dict:
-    row = dict(case=case.name, method=attempt.label, outcome="refused",
-               error=math.nan, energy_error=math.nan, run_s=math.nan,
-               compile_s=math.nan, reason="")  # fmt: skip
-    try:
-        if attempt.route is not None:
-            measured = diagnostics.time_run(attempt.route, **timing)
-        else:
-            measured = diagnostics.time_run(
-                lambda y0: _final(case, attempt, y0), case.y0, **timing
-            )
-        error = diagnostics.final_state_error(measured.output, expected)
-        row.update(error=error, run_s=measured.run_seconds,
-                   compile_s=measured.compile_seconds,
-                   energy_error=energy_error(case, attempt))  # fmt: skip
-        finite = math.isfinite(error)
-        row["outcome"] = (
-            "accurate" if finite and error <= case.tolerance else "degraded"
-        )
-    except Exception as failure:  # a refusal is an outcome of the suite
-        row["reason"] = diagnostics.failure_reason(failure)
-    return row
-
-
-def _overdamped_lagrangian(q, qdot, t, damping_ratio):
-    return 0.5 * qdot**2 - 0.5 * q**2  # ω₀ = 1
-
-
-def _overdamped_dissipation(q, qdot, t, damping_ratio):
-    return damping_ratio * qdot**2  # −∂D/∂q̇ = −2ζ q̇
-
-
-def overdamped_case(damping_ratio: float) -> Case:
-    r"""q̈ + 2ζq̇ + q = 0 from q = 1 at rest: rates λ = −ζ ± √(ζ² − 1), both real."""
-    root = math.sqrt(damping_ratio**2 - 1)
-    slow, fast = -1 / (damping_ratio + root), -(damping_ratio + root)  # no cancellation
-    t1 = 100.0
-    weights = fast / (fast - slow), -slow / (fast - slow)
-    q1 = weights[0] * math.exp(slow * t1) + weights[1] * math.exp(fast * t1)
-    qdot1 = weights[0] * slow * math.exp(slow * t1) + weights[1] * fast * math.exp(
-        fast * t1
-    )
-    lag = lj.Lagrangian(
-        _overdamped_lagrangian,
-        dissipation=_overdamped_dissipation,
-        quadratic_in_velocity=True,
-    )
-    attempts = [
-        Attempt("Tsit5 (explicit)", diffrax.Tsit5()),
-        Attempt("Dopri8 (explicit)", diffrax.Dopri8(), in_quick=False),
-        Attempt("Kvaerno5 (implicit, L-stable)", diffrax.Kvaerno5()),
-        Attempt("Kvaerno5, fixed step", diffrax.Kvaerno5(), steps=1000, in_quick=False),
-        Attempt("GaussLegendre(2) (A-stable)", lj.GaussLegendre(stages=2), steps=1000,
-                in_quick=False),
-        Attempt("GaussLegendre(2), Newton stages", lj.GaussLegendre(stages=2, root_finder=NEWTON),
-                steps=1000, in_quick=False),
-        Attempt("VariationalMidpoint", lj.VariationalMidpoint(), steps=1000, in_quick=False),
-    ]  # fmt: skip
-    return Case(
-        f"overdamped oscillator ζ = {damping_ratio:g}", lag,
-        (jnp.asarray(1.0), jnp.asarray(0.0)), t1, attempts, tolerance=1e-5,
-        expected=np.array([q1, qdot1]), args=jnp.asarray(float(damping_ratio)),
-        conservative=False,
-    )  # fmt: skip
-
-
-def _spring_pendulum_lagrangian(q, qdot, t, stiffness):
-    radius, angle = q[0], q[1]
-    kinetic = 0.5 * (qdot[0] ** 2 + (radius * qdot[1]) ** 2)
-    return (
-        kinetic + 9.81 * radius * jnp.cos(angle) - 0.5 * stiffness * (radius - 1) ** 2
-    )
-
-
-def spring_pendulum_case() -> Case:
-    """Unit mass on a spring of rest length 1 and k = 10⁶ (ω = 1000 against √g)."""
-    stiffness, angle = 1e6, 1.0
-    start = jnp.array([1 + 9.81 * math.cos(angle) / stiffness, angle])
-    lag = lj.Lagrangian(_spring_pendulum_lagrangian, quadratic_in_velocity=True)
-    attempts = [
-        Attempt("Tsit5", diffrax.Tsit5()),
-        Attempt("Dopri8", diffrax.Dopri8()),
-        Attempt("Kvaerno5", diffrax.Kvaerno5()),
-        Attempt("GaussLegendre(2), hω = 1", lj.GaussLegendre(stages=2), steps=2000),
-        Attempt(
-            "GaussLegendre(2), hω = 1, Newton",
-            lj.GaussLegendre(stages=2, root_finder=NEWTON),
-            steps=2000,
-        ),
-        Attempt("GaussLegendre(2), hω = 0.1", lj.GaussLegendre(stages=2), steps=20000),
-    ]
-    return Case(
-        "stiff spring pendulum, ω = 1000", lag, (start, jnp.zeros(2)), 2.0,
-        attempts, tolerance=1e-5, args=jnp.asarray(stiffness),
-    )  # fmt: skip
-
-
-def fpu_case(frequency: float) -> Case:
-    """The FPU chain over t = 1; Störmer–Verlet's step 0.01 puts hω at 0.5 … 100."""
-    chain = FermiPastaUlamChain(frequency=frequency)
-    resolved = 100 * math.ceil(10 * frequency / 100)  # hω = 0.1
-    attempts = [
-        Attempt("StormerVerlet, h = 0.01", lj.StormerVerlet(), steps=100),
-        Attempt(f"StormerVerlet, hω = {frequency / resolved:.2g}", lj.StormerVerlet(), steps=resolved, in_quick=False),
-        Attempt("GaussLegendre(2), h = 0.01", lj.GaussLegendre(stages=2), steps=100, in_quick=False),
-        Attempt("Tsit5", diffrax.Tsit5()),
-        Attempt("Kvaerno5", diffrax.Kvaerno5(), in_quick=False),
-    ]  # fmt: skip
-    return Case(
-        f"stiff FPU chain, ω = {frequency:g}", chain, chain.initial_state(), 1.0,
-        attempts, tolerance=1e-4,
-    )  # fmt: skip
-
-
-def near_separatrix_case() -> Case:
-    """Released at 179.9°: after one exact period (AGM) it must be back at rest."""
-    pendulum = SimplePendulum(amplitude=math.radians(179.9))
-    period = float(pendulum.period())
-    attempts = [
-        Attempt("Yoshida4, 2000 steps", lj.Yoshida4(), steps=2000),
-        Attempt("Yoshida4, 20000 steps", lj.Yoshida4(), steps=20000),
-        Attempt("KahanLi8, 2000 steps", lj.KahanLi8(), steps=2000),
-        Attempt("Tsit5, rtol 1e-8", diffrax.Tsit5()),
-        Attempt("Dopri8, rtol 1e-12", diffrax.Dopri8(), rtol=1e-12),
-    ]
-    return Case(
-        "pendulum at 179.9°, one period", pendulum, pendulum.initial_state(), period,
-        attempts, tolerance=1e-4, expected=np.array([math.radians(179.9), 0.0]),
-    )  # fmt: skip
-
-
-def eccentric_kepler_case() -> Case:
-    """e = 0.99 over 10 periods: periapsis speed 14× the mean, against Kepler's equation."""
-    orbit = KeplerCartesian(eccentricity=0.99)
-    t1 = 10 * float(orbit.period())
-    expected = np.concatenate(
-        [np.asarray(x) for x in orbit.orbit_state(jnp.asarray(t1))]
-    )
-    attempts = [
-        Attempt("StormerVerlet, 10⁵ steps", lj.StormerVerlet(), steps=100_000),
-        Attempt("Yoshida4, 10⁵ steps", lj.Yoshida4(), steps=100_000),
-        Attempt("Tsit5, rtol 1e-10", diffrax.Tsit5(), rtol=1e-10),
-        Attempt("Dopri8, rtol 1e-12", diffrax.Dopri8(), rtol=1e-12),
-    ]
-    return Case(
-        "Kepler e = 0.99, 10 periods", orbit, orbit.initial_state(), t1, attempts,
-        tolerance=1e-4, expected=expected,
-    )  # fmt: skip
-
-
-def singular_case() -> Case:
-    """L = ½(q̇₁ + q̇₂)² − ½|q|²: the mass matrix is singular everywhere."""
-    lag = lj.Lagrangian(lambda q, qd: 0.5 * (qd[0] + qd[1]) ** 2 - 0.5 * jnp.sum(q**2))
-    attempts = [
-        Attempt("Tsit5, adaptive", diffrax.Tsit5()),
-        Attempt("Tsit5, fixed step", diffrax.Tsit5(), steps=100),
-        Attempt("GaussLegendre(2)", lj.GaussLegendre(stages=2), steps=100),
-    ]
-    return Case(
-        "singular mass matrix", lag, (jnp.array([1.0, 0.0]), jnp.zeros(2)), 1.0,
-        attempts, tolerance=1e-4, expected=np.full(4, np.nan),
-    )  # fmt: skip
-
-
-def gimbal_lock_case() -> Case:
-    """A free body whose Euler angle θ starts at 10⁻⁶: cond(M) ≈ 10¹³.
-
-    The same body on quaternions (`RigidBodyYoshida4`) has no such point; the
-    reference is Dopri8 on the quaternion equations at rtol = 10⁻¹².
-    """
-    body = TorqueFreeBody(angles0=(0.3, 1e-6, -0.4))
-    rigid, start, t1 = body.rigid_body(), body.initial_body_state(), 2.0
-
-    def final_rotation_and_rate(**options) -> jax.Array:
-        trajectory = lj.simulate(rigid, start, t1=t1, **options)
-        quaternion, momentum = trajectory.q[-1], trajectory.ys[1][-1]
-        return jnp.concatenate(
-            [quaternion_to_matrix(quaternion).ravel(), momentum / body.moments]
-        )
-
-    def quaternion_route() -> jax.Array:
-        return final_rotation_and_rate(dt=t1 / 2000, solver=RigidBodyYoshida4())
-
-    def expected() -> jax.Array:
-        return final_rotation_and_rate(solver=diffrax.Dopri8(), rtol=1e-12, atol=1e-12)
-
-    attempts = [
-        Attempt("Euler angles, Dopri8", diffrax.Dopri8(), rtol=1e-10, max_steps=10**4),
-        Attempt(
-            "Euler angles, GaussLegendre(2)",
-            lj.GaussLegendre(stages=2),
-            steps=2000,
-            in_quick=False,
-        ),
-        Attempt("quaternion, RigidBodyYoshida4", None, route=quaternion_route),
-    ]
-    return Case(
-        "free body near gimbal lock (Euler θ = 1e-6)", body, body.initial_state(), t1,
-        attempts, tolerance=1e-4, expected=expected,
-        comparable=lambda q, qdot: jnp.concatenate([
-            euler_zxz_to_rotation(q).ravel(), euler_zxz_body_angular_velocity(q, qdot)]),
-    )  # fmt: skip
-
-
-def build_cases(quick: bool) -> list[Case]:
-    """Every case; quick keeps five, with their cheapest telling attempts."""
+def build_cases(quick: bool) -> list[Study]:
+    """Every case and study (each has `name` and `rows(timing)`); quick keeps a
+    subset with their cheapest telling attempts."""
     if not quick:
         return [
             *(fpu_case(omega) for omega in (50.0, 1e3, 1e4)),
             overdamped_case(1e2), overdamped_case(1e4), spring_pendulum_case(),
             near_separatrix_case(), eccentric_kepler_case(), singular_case(),
-            gimbal_lock_case(),
+            gimbal_lock_case(), near_collision_kepler_case(periods=10), PeriodCheck(),
+            separatrix_pendulum_case(), foucault_study(quick), brouwer_study(quick),
+            lyapunov_study(quick),
         ]  # fmt: skip
     cases = [fpu_case(1e3), overdamped_case(1e2), overdamped_case(1e4),
-             singular_case(), gimbal_lock_case()]  # fmt: skip
+             singular_case(), gimbal_lock_case(), near_collision_kepler_case(periods=1),
+             PeriodCheck(), separatrix_pendulum_case()]  # fmt: skip
     for case in cases:
-        case.attempts = [attempt for attempt in case.attempts if attempt.in_quick]
-    return cases
+        if isinstance(case, Case):
+            case.attempts = [attempt for attempt in case.attempts if attempt.in_quick]
+            # Its own compilation per attempt, for a column the quick tests don't use.
+            case.measure_energy = False
+    return [*cases, foucault_study(quick), brouwer_study(quick), lyapunov_study(quick)]
+
+
+def _print_row(row: dict) -> None:
+    print(f"{row['case']:44s} {row['method']:34s} {row['outcome']:9s} "
+          f"{row['error']:8.1e} {row['energy_error']:8.1e} {row['run_s']:9.2e}  "
+          f"{row['measure']}{row['reason'][:110]}", flush=True)  # fmt: skip
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="a CI-sized subset")
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results")
     options = parser.parse_args(argv)
@@ -361,17 +113,13 @@ def main(argv: list[str] | None = None) -> int:
     timing = dict(repeats=3, max_seconds=0.3 if options.quick else 2.0)
     rows = []
     print(f"{'case':44s} {'method':34s} {'outcome':9s} {'error':>8s} {'energy':>8s} "
-          f"{'run s':>9s}  reason")  # fmt: skip
+          f"{'run s':>9s}  measure / reason")  # fmt: skip
     for case in build_cases(options.quick):
-        expected = reference(case)
-        for attempt in case.attempts:
-            row = run_attempt(case, attempt, expected, timing)
+        for row in case.rows(timing):
             rows.append(row)
-            print(f"{row['case']:44s} {row['method']:34s} {row['outcome']:9s} "
-                  f"{row['error']:8.1e} {row['energy_error']:8.1e} {row['run_s']:9.2e}  "
-                  f"{row['reason'][:110]}", flush=True)  # fmt: skip
+            _print_row(row)
     with open(options.out / "stability.csv", "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer = csv.DictWriter(handle, fieldnames=list(ROW_KEYS))
         writer.writeheader()
         writer.writerows(rows)
     (options.out / "stability.json").write_text(json.dumps(rows, indent=1))

@@ -25,6 +25,7 @@ over the solver's `step` (see `fixed_step.py`); everything else runs through
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import diffrax
@@ -32,6 +33,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optimistix as optx
 
 from .fixed_step import integrate_fixed_steps
 from .mechanics.hamiltonian import AbstractHamiltonian, SeparableHamiltonian
@@ -46,6 +48,7 @@ from .solvers.rattle import Rattle, RattleTerm
 from .solvers.rigid import QuaternionProjection, RigidBodyYoshida4
 from .solvers.splitting import Yoshida4
 from .solvers.variational import LagrangianTerm
+from .step_grid import ExactGridStepSize, grid_step
 from .trajectory import Trajectory
 from .vector_fields import (
     HamiltonVectorField,
@@ -172,9 +175,40 @@ def _hamiltonian_terms(system: AbstractHamiltonian, solver):
     return diffrax.ODETerm(HamiltonVectorField(system))
 
 
-def _stepping(solver, t0, t1, dt, rtol, atol):
+def _with_implicit_tolerances(
+    solver: diffrax.AbstractSolver, rtol: float, atol: float
+) -> diffrax.AbstractSolver:
+    """A diffrax implicit solver whose unset Newton tolerances are `rtol`, `atol`.
+
+    diffrax's implicit solvers (Kvaerno5, …) take them from the adaptive step-size
+    controller by default; with a fixed step there is none, so simulate's own
+    tolerances stand in (the norm is then diffrax's RMS norm).
+    """
+    if not isinstance(solver, diffrax.AbstractImplicitSolver):
+        return solver
+    finder = solver.root_finder
+    fills = {"rtol": rtol, "atol": atol, "norm": optx.rms_norm}
+    # diffrax marks an unset tolerance with a sentinel object, not a number.
+    unset = [
+        name
+        for name in fills
+        if hasattr(finder, name)
+        and not isinstance(getattr(finder, name), (int, float, Callable))
+    ]
+    if not unset:
+        return solver
+    return eqx.tree_at(
+        lambda s: [getattr(s.root_finder, name) for name in unset],
+        solver,
+        [fills[name] for name in unset],
+    )
+
+
+def _stepping(solver, t0, t1, dt, rtol, atol, dtype):
     if dt is not None:
-        return diffrax.ConstantStepSize(), dt
+        if all(isinstance(x, (int, float)) for x in (t0, t1, dt)):
+            return ExactGridStepSize(), grid_step(t0, t1, dt, dtype)
+        return diffrax.ConstantStepSize(), dt  # traced times: diffrax's own grid
     if not isinstance(solver, diffrax.AbstractAdaptiveSolver):
         raise ValueError(
             f"{type(solver).__name__} has no error estimate, so it cannot choose its own "
@@ -271,6 +305,8 @@ def simulate(
     if _is_constrained(system):
         solver = _constrained_solver(solver)
     terms, state0, integrated = _terms_and_state(system, solver, y0, t0, args)
+    if dt is not None:
+        solver = _with_implicit_tolerances(solver, rtol, atol)
     scan_path = (
         dt is not None
         and ts is None
@@ -282,8 +318,9 @@ def simulate(
     )
     if scan_path:
         assert dt is not None
+        step = grid_step(t0, t1, dt, dtype)
         y1, result, steps = integrate_fixed_steps(
-            terms, solver, t0, t1, dt, state0, args, dtype
+            terms, solver, t0, t1, step, state0, args, dtype
         )
         if throw:
             y1 = result.error_if(y1, result != diffrax.RESULTS.successful)
@@ -369,7 +406,7 @@ def _diffeqsolve(
     dtype,
 ):
     """The general path: `diffrax.diffeqsolve` with saving, adjoints, adaptivity."""
-    controller, dt0 = _stepping(solver, t0, t1, dt, rtol, atol)
+    controller, dt0 = _stepping(solver, t0, t1, dt, rtol, atol, dtype)
     if max_steps is None:
         max_steps = _fixed_step_count(t0, t1, dt) or 100_000
     # diffrax promotes the state to the dtype of the times: give it the state's.

@@ -267,3 +267,63 @@ def test_saved_fixed_step_runs_get_their_exact_step_budget():
     )  # fmt: skip
     assert int(trajectory.stats["num_steps"]) == steps
     assert abs(float(trajectory.q[-1]) - np.cos(t1)) < 1e-5  # (h²/24)·t phase error
+
+
+@pytest.mark.parametrize("saved", [False, True])
+def test_diffrax_implicit_solver_with_a_fixed_step(saved):
+    """Kvaerno5 at a fixed dt: its Newton tolerances come from simulate's rtol/atol."""
+    lag = oscillator_lagrangian()
+    ts = jnp.linspace(0.0, 1.0, 3) if saved else None
+    trajectory = lj.simulate(
+        lag, (1.0, 0.0), t1=1.0, dt=0.01, solver=diffrax.Kvaerno5(), args=1.0, ts=ts
+    )
+    assert abs(float(trajectory.q[-1]) - np.cos(1.0)) < 1e-8
+
+
+def test_fixed_steps_are_all_equal_on_an_awkward_dt():
+    """dt = 1/60: every grid time of the scan path is exact, so every h is equal.
+
+    Checked on the grid and through its consequence: Störmer–Verlet (kick–drift–
+    kick) on H = (p² + q²)/2 keeps H̃ = (p² + (1 − h²/4) q²)/2 exactly but for
+    round-off. Over 6·10⁴ steps that stays at ~1e-16 (Brouwer, compensated);
+    with the raw 1/60 the ulp-wobble of h made it 4.4e-14 (6·10⁵ steps: 7e-12).
+    """
+    from lagjax.step_grid import grid_step
+
+    steps, dt = 60_000, 1 / 60
+    rounded = grid_step(0.0, steps * dt, dt)
+    assert abs(rounded - dt) <= 1e-8 * dt
+    grid = np.arange(steps + 1) * rounded
+    assert len(set(np.diff(grid))) == 1  # exact; np.arange(...) / 60 is not
+    assert len(set(np.diff(np.arange(steps + 1) * dt))) > 1
+    assert grid_step(0.1, steps * dt, dt) == dt  # t0 off the grid: left alone
+
+    oscillator = lj.SeparableHamiltonian(lambda p: 0.5 * p**2, lambda q: 0.5 * q**2)
+    start = (np.cos(0.3), np.sin(0.3))
+    final = lj.simulate(
+        oscillator, start, t1=steps * rounded, dt=dt, solver=lj.StormerVerlet()
+    )
+    assert int(final.stats["num_steps"]) == steps
+
+    def modified(q, p):
+        return 0.5 * (p**2 + (1 - rounded**2 / 4) * q**2)
+
+    drift = modified(float(final.q[-1]), float(final.p[-1])) - modified(*start)
+    assert abs(drift) < 1e-15, drift
+
+
+def test_saved_fixed_step_runs_step_on_the_exact_grid():
+    """With saving (the diffeqsolve path) the steps are exactly equal too."""
+    from lagjax.step_grid import grid_step
+
+    oscillator = lj.SeparableHamiltonian(lambda p: 0.5 * p**2, lambda q: 0.5 * q**2)
+    steps, dt = 6_000, 1 / 60
+    rounded = grid_step(0.0, steps * dt, dt)
+    trajectory = lj.simulate(
+        oscillator, (1.0, 0.0), t1=steps * rounded, dt=dt, solver=lj.StormerVerlet(),
+        saveat=diffrax.SaveAt(steps=True), max_steps=steps + 1,
+    )  # fmt: skip
+    times = np.asarray(trajectory.ts)
+    times = times[np.isfinite(times)]
+    assert len(times) == steps and len(set(np.diff(times))) == 1
+    assert np.diff(times)[0] == rounded
