@@ -63,6 +63,7 @@ from stability_extreme import (  # noqa: E402
     near_collision_kepler_case,
     separatrix_pendulum_case,
 )
+from stability_float32 import precision_study  # noqa: E402
 from stability_lyapunov import lyapunov_study  # noqa: E402
 from stability_stiff import (  # noqa: E402
     eccentric_kepler_case,
@@ -85,7 +86,7 @@ def build_cases(quick: bool) -> list[Study]:
             near_separatrix_case(), eccentric_kepler_case(), singular_case(),
             gimbal_lock_case(), near_collision_kepler_case(periods=10), PeriodCheck(),
             separatrix_pendulum_case(), foucault_study(quick), brouwer_study(quick),
-            lyapunov_study(quick),
+            lyapunov_study(quick), precision_study(quick),
         ]  # fmt: skip
     cases = [fpu_case(1e3), overdamped_case(1e2), overdamped_case(1e4),
              singular_case(), gimbal_lock_case(), near_collision_kepler_case(periods=1),
@@ -95,7 +96,8 @@ def build_cases(quick: bool) -> list[Study]:
             case.attempts = [attempt for attempt in case.attempts if attempt.in_quick]
             # Its own compilation per attempt, for a column the quick tests don't use.
             case.measure_energy = False
-    return [*cases, foucault_study(quick), brouwer_study(quick), lyapunov_study(quick)]
+    return [*cases, foucault_study(quick), brouwer_study(quick), lyapunov_study(quick),
+            precision_study(quick)]  # fmt: skip
 
 
 def _print_row(row: dict) -> None:
