@@ -136,7 +136,7 @@ class RigidBody(eqx.Module):
 
         def turned(angle):
             return self._potential_of_matrix(
-                rotation @ (jnp.eye(3) + skew(angle)), t, args
+                rotation @ (jnp.eye(3, dtype=rotation.dtype) + skew(angle)), t, args
             )
 
         return -jax.grad(turned)(jnp.zeros(3, dtype=rotation.dtype))

@@ -80,34 +80,47 @@ _RigidState = Any
 # The free-body drift D_τ: (body axis, fraction of τ) in order of application.
 _FREE_BODY_ROTATIONS = ((0, 0.5), (1, 0.5), (2, 1.0), (1, 0.5), (0, 0.5))
 
-_Scalars = list[jax.Array]
+
+def _cyclic(v: jax.Array, start) -> jax.Array:
+    """$(v_s, v_{s+1}, v_{s+2})$, indices mod 3, for a traced `start`.
+
+    A window of $[v, v]$: a permutation, so exact. With it one rotation serves
+    every axis, and the axis can be loop data instead of Python code.
+    """
+    return jax.lax.dynamic_slice_in_dim(jnp.concatenate([v, v]), start, 3)
 
 
-def _turn_about_axis(axis: int, tau, moments, momentum: _Scalars, delta: _Scalars):
+def _turn_about_axis(axis, tau, moments, momentum, delta):
     r"""The exact flow of $\Pi_i^2/2I_i$ for a time τ, on increments.
 
-    `momentum` is the current Π (three scalars) and `delta` the quaternion
-    increment (four scalars, q = q₀ ⊗ (1 + δ)). Returns the change of Π and the
-    new δ. Versines are formed as 2 sin²(x/2), not 1 − cos x, to keep their bits.
+    `momentum` is the current Π, shape (3,), and `delta` the quaternion increment,
+    shape (4,), with q = q₀ ⊗ (1 + δ); `axis` may be traced. Returns the change of
+    Π and the new δ. Vectors are taken in the cyclic order (i, j, k) that starts at
+    the axis and turned back after. Versines are formed as 2 sin²(x/2), not
+    1 − cos x, to keep their bits.
     """
-    j, k = (axis + 1) % 3, (axis + 2) % 3
-    angle = tau * momentum[axis] / moments[axis]
+    m = _cyclic(momentum, axis)
+    angle = tau * m[0] / moments[axis]
     sin_angle = jnp.sin(angle)
     versine = 2 * jnp.sin(0.5 * angle) ** 2
-    change = [jnp.zeros_like(angle)] * 3
     # Π turns by −α about e_i.
-    change[j] = -versine * momentum[j] + sin_angle * momentum[k]
-    change[k] = -sin_angle * momentum[j] - versine * momentum[k]
+    change_j = -versine * m[1] + sin_angle * m[2]
+    change_k = -sin_angle * m[1] - versine * m[2]
     # (1 + δ) ⊗ (1 + ρ) with ρ = (cos(α/2) − 1, e_i sin(α/2)).
     rho_w = -2 * jnp.sin(0.25 * angle) ** 2
     rho_v = jnp.sin(0.5 * angle)
-    w, v = delta[0], delta[1:]
-    new_v = list(v)
-    new_v[axis] = v[axis] + rho_v + w * rho_v + rho_w * v[axis]
-    new_v[j] = v[j] + rho_w * v[j] + rho_v * v[k]
-    new_v[k] = v[k] + rho_w * v[k] - rho_v * v[j]
-    new_w = w + rho_w + w * rho_w - rho_v * v[axis]
-    return change, [new_w, *new_v]
+    w, v = delta[0], _cyclic(delta[1:], axis)
+    new_v = jnp.stack(
+        [
+            v[0] + rho_v + w * rho_v + rho_w * v[0],
+            v[1] + rho_w * v[1] + rho_v * v[2],
+            v[2] + rho_w * v[2] - rho_v * v[1],
+        ]
+    )
+    new_w = w + rho_w + w * rho_w - rho_v * v[0]
+    back = (3 - axis) % 3  # the inverse permutation
+    change = _cyclic(jnp.stack([jnp.zeros_like(change_j), change_j, change_k]), back)
+    return change, jnp.concatenate([new_w[None], _cyclic(new_v, back)])
 
 
 def _add_to_state(y, increment, compensation):
@@ -156,52 +169,58 @@ class AbstractRigidBodySplitting(diffrax.AbstractSolver[_RigidState]):
         delta, change = self._increments(term.body, start, h, q0, momentum0, args)
         compensation_q, compensation_p = solver_state or (None, None)
         q1, compensation_q = _add_to_state(
-            q0, quaternion_multiply(q0, jnp.stack(delta)), compensation_q
+            q0, quaternion_multiply(q0, delta), compensation_q
         )
-        momentum1, compensation_p = _add_to_state(
-            momentum0, jnp.stack(change), compensation_p
-        )
+        momentum1, compensation_p = _add_to_state(momentum0, change, compensation_p)
         if solver_state is not None:
             solver_state = (compensation_q, compensation_p)
         y1 = (q1, momentum1)
         return y1, None, dict(y0=y0, y1=y1), solver_state, RESULTS.successful
 
     def _increments(self, body, start, h, q0, momentum0, args):
-        """(δ, ΔΠ) of one step, as four and three scalars.
+        """(δ, ΔΠ) of one step, shapes (4,) and (3,).
 
-        The stages run as a `lax.scan` over the coefficient table, so XLA compiles
-        one stage however many there are. Unrolled, the long chain of scalar
-        rotations of a composition compiled (on CPU, with traced moments) to code
-        60× slower: 170 μs against 2.7 μs per Yoshida4 step.
+        Two nested `lax.scan`s: over the stages of the composition and, within a
+        stage, over its five axis rotations, with the axis as data. XLA on CPU
+        compiles a loop whose body reads and writes less than 1 kB (its default
+        small-while-loop threshold) into a single kernel; one rotation fits, a
+        whole step does not, and straight-line code then dispatches every fused
+        piece of it on its own. Measured inside `lj.simulate` (10⁵ steps, 2 cores):
+        2× faster per RigidBodyVerlet step and 6× per RigidBodyYoshida4 step than
+        the same arithmetic written out (and 3.6× and 1.3× vmapped over 1024
+        bodies); unrolled stages were slower still (170 μs a Yoshida4 step).
         """
 
         def kick(change, delta, coefficient, clock):
-            q_now = q0 + quaternion_multiply(q0, jnp.stack(delta))
+            q_now = q0 + quaternion_multiply(q0, delta)
             torque = body.torque(q_now, start + clock * h, args)
-            return [change[i] + coefficient * h * torque[i] for i in range(3)]
+            return change + coefficient * h * torque
+
+        def rotation(carry, row):
+            change, delta = carry
+            tau_over_h, axis = row
+            turn, delta = _turn_about_axis(
+                axis, tau_over_h * h, body.moments, momentum0 + change, delta
+            )
+            return (change + turn, delta), None
 
         def stage(carry, coefficients):
             change, delta = carry
             weight, kick_coefficient, clock = coefficients
             if body.potential is not None:
                 change = kick(change, delta, kick_coefficient, clock)
-            for axis, fraction in _FREE_BODY_ROTATIONS:
-                momentum = [momentum0[i] + change[i] for i in range(3)]
-                turn, delta = _turn_about_axis(
-                    axis, fraction * weight * h, moments, momentum, delta
-                )
-                change = [change[i] + turn[i] for i in range(3)]
-            return (change, delta), None
+            rows = (weight * fractions, axes)
+            return jax.lax.scan(rotation, (change, delta), rows)[0], None
 
-        moments = [body.moments[i] for i in range(3)]
+        # Coefficients in the state's precision, so a float32 run stays float32.
+        dtype = jnp.result_type(q0, momentum0)
+        axes = jnp.asarray([axis for axis, _ in _FREE_BODY_ROTATIONS])
+        fractions = jnp.asarray([f for _, f in _FREE_BODY_ROTATIONS], dtype=dtype)
         weights = self.composition_weights
         kicks = _merged_kicks(weights)
         clocks = [sum(weights[:stage]) for stage in range(len(weights))]
-        table = jnp.asarray([weights, kicks[:-1], clocks]).T
-        carry = (
-            [jnp.zeros_like(h * momentum0[0])] * 3,
-            [jnp.zeros_like(h * q0[0])] * 4,
-        )
+        table = jnp.asarray([weights, kicks[:-1], clocks], dtype=dtype).T
+        carry = (jnp.zeros_like(h * momentum0), jnp.zeros_like(h * q0))
         (change, delta), _ = jax.lax.scan(stage, carry, table)
         if body.potential is not None:
             change = kick(change, delta, kicks[-1], 1.0)
