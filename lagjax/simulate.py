@@ -48,7 +48,7 @@ from .solvers.rattle import Rattle, RattleTerm
 from .solvers.rigid import QuaternionProjection, RigidBodyYoshida4
 from .solvers.splitting import Yoshida4
 from .solvers.variational import LagrangianTerm
-from .step_grid import ExactGridStepSize, grid_step
+from .step_grid import grid_step
 from .trajectory import Trajectory
 from .vector_fields import (
     HamiltonVectorField,
@@ -204,11 +204,9 @@ def _with_implicit_tolerances(
     )
 
 
-def _stepping(solver, t0, t1, dt, rtol, atol, dtype):
+def _stepping(solver, t0, t1, dt, rtol, atol):
     if dt is not None:
-        if all(isinstance(x, (int, float)) for x in (t0, t1, dt)):
-            return ExactGridStepSize(), grid_step(t0, t1, dt, dtype)
-        return diffrax.ConstantStepSize(), dt  # traced times: diffrax's own grid
+        return diffrax.ConstantStepSize(), dt
     if not isinstance(solver, diffrax.AbstractAdaptiveSolver):
         raise ValueError(
             f"{type(solver).__name__} has no error estimate, so it cannot choose its own "
@@ -406,7 +404,7 @@ def _diffeqsolve(
     dtype,
 ):
     """The general path: `diffrax.diffeqsolve` with saving, adjoints, adaptivity."""
-    controller, dt0 = _stepping(solver, t0, t1, dt, rtol, atol, dtype)
+    controller, dt0 = _stepping(solver, t0, t1, dt, rtol, atol)
     if max_steps is None:
         max_steps = _fixed_step_count(t0, t1, dt) or 100_000
     # diffrax promotes the state to the dtype of the times: give it the state's.

@@ -310,20 +310,3 @@ def test_fixed_steps_are_all_equal_on_an_awkward_dt():
 
     drift = modified(float(final.q[-1]), float(final.p[-1])) - modified(*start)
     assert abs(drift) < 1e-15, drift
-
-
-def test_saved_fixed_step_runs_step_on_the_exact_grid():
-    """With saving (the diffeqsolve path) the steps are exactly equal too."""
-    from lagjax.step_grid import grid_step
-
-    oscillator = lj.SeparableHamiltonian(lambda p: 0.5 * p**2, lambda q: 0.5 * q**2)
-    steps, dt = 6_000, 1 / 60
-    rounded = grid_step(0.0, steps * dt, dt)
-    trajectory = lj.simulate(
-        oscillator, (1.0, 0.0), t1=steps * rounded, dt=dt, solver=lj.StormerVerlet(),
-        saveat=diffrax.SaveAt(steps=True), max_steps=steps + 1,
-    )  # fmt: skip
-    times = np.asarray(trajectory.ts)
-    times = times[np.isfinite(times)]
-    assert len(times) == steps and len(set(np.diff(times))) == 1
-    assert np.diff(times)[0] == rounded
