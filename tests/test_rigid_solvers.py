@@ -2,8 +2,10 @@
 
 Convergence order on nonlinear bodies (asymmetric free body; asymmetric heavy body
 with gravity, which exercises the kicks), time reversibility, |L| and the unit
-quaternion kept to round-off, and the plumbing: diffrax's reversed-time wrapper,
-lagjax's fixed-step scan, vmap and grad.
+quaternion kept to round-off — for both free-body splits — the symmetric-top
+split's exactness on symmetric bodies (the Earth's wobble to round-off), float32
+runs, and the plumbing: diffrax's reversed-time wrapper, lagjax's fixed-step scan,
+vmap and grad.
 """
 
 import diffrax
@@ -13,19 +15,24 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+import lagjax as lj
 from lagjax.fixed_step import integrate_fixed_steps
+from lagjax.precision import cast_floats
 from lagjax.rigid import (
     RigidBody,
     RigidBodyTerm,
     axis_angle_quaternion,
+    quaternion_multiply,
     quaternion_to_matrix,
 )
+from lagjax.rigid.free_body import space_precession_rate, symmetric_precession_rate
+from lagjax.scenes.rigid import EarthFreePrecession
 from lagjax.solvers.rigid import (
     QuaternionProjection,
     RigidBodyVerlet,
     RigidBodyYoshida4,
 )
-from tests.helpers import tree_allclose
+from tests.helpers import relative_close, tree_allclose
 
 Q0 = axis_angle_quaternion(jnp.array([0.6, 0.0, 0.8]), 0.7)
 OMEGA0 = jnp.array([0.3, 1.0, 0.2])
@@ -39,6 +46,8 @@ def gravity(rotation, t, mgl):
 FREE = RigidBody(jnp.array([1.0, 2.0, 3.0]))
 HEAVY = RigidBody(jnp.array([1.0, 1.5, 0.7]), gravity)
 BODIES = {"free": (FREE, None), "heavy": (HEAVY, jnp.asarray(2.0))}
+SPLITS = ("symmetric-top", "axes")
+SOLVERS = {"verlet": RigidBodyVerlet, "yoshida4": RigidBodyYoshida4}
 
 
 def final_state(body, solver, y0, dt, steps, args):
@@ -65,19 +74,14 @@ def _error(y, reference):
     return max(float(jnp.max(jnp.abs(a - b))) for a, b in zip(y, reference))
 
 
+@pytest.mark.parametrize("split", SPLITS)
 @pytest.mark.parametrize("name", ["free", "heavy"])
-@pytest.mark.parametrize(
-    "solver, steps",
-    [
-        (RigidBodyVerlet(), (40, 80, 160, 320)),
-        (RigidBodyYoshida4(), (40, 80, 160, 320)),
-    ],
-    ids=["verlet", "yoshida4"],
-)
-def test_convergence_order(name, solver, steps):
+@pytest.mark.parametrize("method", list(SOLVERS))
+def test_convergence_order(method, name, split):
     body, args = BODIES[name]
+    solver = SOLVERS[method](free_body=split)
     y0 = body.state_from_angular_velocity(Q0, OMEGA0)
-    t1 = 4.0
+    t1, steps = 4.0, (40, 80, 160, 320)
     reference = final_state(body, RigidBodyYoshida4(), y0, t1 / 4000, 4000, args)
     errors = [
         _error(final_state(body, solver, y0, t1 / n, n, args), reference) for n in steps
@@ -87,12 +91,12 @@ def test_convergence_order(name, solver, steps):
     assert errors[-1] > 1e-12  # above round-off, so the slopes measure truncation
 
 
+@pytest.mark.parametrize("split", SPLITS)
 @pytest.mark.parametrize("name", ["free", "heavy"])
-@pytest.mark.parametrize(
-    "solver", [RigidBodyVerlet(), RigidBodyYoshida4()], ids=["verlet", "yoshida4"]
-)
-def test_time_reversible(name, solver):
+@pytest.mark.parametrize("method", list(SOLVERS))
+def test_time_reversible(method, name, split):
     body, args = BODIES[name]
+    solver = SOLVERS[method](free_body=split)
     y0 = body.state_from_angular_velocity(Q0, OMEGA0)
     forward = final_state(body, solver, y0, 0.05, 200, args)
     assert _error(forward, y0) > 0.1
@@ -114,15 +118,16 @@ def test_reversed_time_through_diffeqsolve():
     assert tree_allclose(back, y0, rtol=0, atol=1e-13)
 
 
+@pytest.mark.parametrize("split", SPLITS)
 @pytest.mark.parametrize("compensated", [True, False])
-def test_invariants_to_round_off_over_long_runs(compensated):
+def test_invariants_to_round_off_over_long_runs(compensated, split):
     """10⁵ steps: exact rotations keep |L|, the space L and |q| to round-off. With
     Kahan compensation that round-off does not even accumulate (measured: 2e-16 after
     10⁶ steps, against a 5e-14 random walk without)."""
     tolerance = 2e-15 if compensated else 1e-13
     body = FREE
     y0 = body.state_from_angular_velocity(Q0, OMEGA0)
-    solver = RigidBodyVerlet(compensated=compensated)
+    solver = RigidBodyVerlet(compensated=compensated, free_body=split)
     q, momentum = final_state(body, solver, y0, 0.01, 100_000, None)
     assert abs(jnp.linalg.norm(momentum) / jnp.linalg.norm(y0[1]) - 1) < tolerance
     drift = body.angular_momentum_space(q, momentum) - body.angular_momentum_space(*y0)
@@ -206,12 +211,129 @@ def test_wrong_term_is_refused():
         )
 
 
-def test_orientation_stays_orthonormal_over_a_million_steps():
+@pytest.mark.parametrize("split", SPLITS)
+def test_orientation_stays_orthonormal_over_a_million_steps(split):
     # The issue's bound: ‖RᵀR − I‖ ≤ 1e-12 after 10⁶ Lie–Poisson steps (heavy top,
     # so the kicks and the free rotations both act on the orientation).
     heavy, args = BODIES["heavy"]
     y0 = heavy.state_from_angular_velocity(Q0, OMEGA0)
-    q, _ = final_state(heavy, RigidBodyVerlet(), y0, 0.01, 1_000_000, args)
+    solver = RigidBodyVerlet(free_body=split)
+    q, _ = final_state(heavy, solver, y0, 0.01, 1_000_000, args)
     rotation = quaternion_to_matrix(q)
     defect = jnp.max(jnp.abs(rotation.T @ rotation - jnp.eye(3)))
     assert float(defect) <= 1e-12
+
+
+def _symmetric_top(body, y0, t):
+    """The free symmetric top in closed form: Π turns in the body about e3 at
+    Ω = (I1 − I3)ω3/I1 (course text eq. 4.47), and the body turns about the fixed
+    L at |L|/I1 (Landau & Lifshitz §33) and about its own e3 at Ω."""
+    q0, momentum0 = y0
+    rate = symmetric_precession_rate(body.moments, momentum0[2] / body.moments[2])
+    c, s = jnp.cos(rate * t), jnp.sin(rate * t)
+    p1, p2, p3 = momentum0
+    momentum = jnp.stack([c * p1 + s * p2, -s * p1 + c * p2, p3])
+    space = body.angular_momentum_space(*y0)
+    about_space = axis_angle_quaternion(
+        space / jnp.linalg.norm(space), space_precession_rate(body.moments, space) * t
+    )
+    about_figure = axis_angle_quaternion(jnp.array([0.0, 0.0, 1.0]), rate * t)
+    q = quaternion_multiply(quaternion_multiply(about_space, q0), about_figure)
+    return q, momentum
+
+
+@pytest.mark.parametrize("method", list(SOLVERS))
+@pytest.mark.parametrize("moments", [(1.0, 1.0, 1.8), (2.0, 2.0, 1.0)])
+def test_symmetric_top_split_is_exact_for_a_symmetric_free_body(moments, method):
+    """Oblate and prolate: the drift is the exact flow, so any step (here ωh = 0.75,
+    80 steps) gives the closed form to round-off; McLachlan's axes split does not."""
+    body = RigidBody(jnp.array(moments))
+    y0 = body.state_from_angular_velocity(Q0, jnp.array([0.4, 0.1, 3.0]))
+    h, steps = 0.25, 80
+    q_exact, momentum_exact = _symmetric_top(body, y0, h * steps)
+
+    def errors(split):
+        solver = SOLVERS[method](free_body=split)
+        q, momentum = final_state(body, solver, y0, h, steps, None)
+        rotation = quaternion_to_matrix(q) - quaternion_to_matrix(q_exact)
+        momentum_error = jnp.max(jnp.abs(momentum - momentum_exact))
+        return (
+            float(momentum_error / jnp.linalg.norm(y0[1])),
+            float(jnp.max(jnp.abs(rotation))),
+        )
+
+    assert max(errors("symmetric-top")) < 1e-12, errors("symmetric-top")
+    assert min(errors("axes")) > 1e-5, errors("axes")
+
+
+def test_earth_wobble_period_to_round_off_at_an_hour_step():
+    """Euler's 305-day free wobble with h = 1 h (ωh = 0.26): the symmetric-top split
+    is the exact flow of the Earth's symmetric body; the axes split's commutator
+    errors, O((ωh)²)ω, swamp the slow precession Ω = ω/305."""
+    earth = EarthFreePrecession()
+    t1, ts = earth.default_t1, jnp.arange(0.0, earth.default_t1, 6 * 3600.0)
+
+    def checks(split):
+        trajectory = lj.simulate(
+            earth.rigid_body(), earth.initial_body_state(), t1=t1, dt=3600.0, ts=ts,
+            args=earth, solver=RigidBodyYoshida4(free_body=split),
+        )  # fmt: skip
+        return earth.checks(trajectory)
+
+    exact = checks("symmetric-top")
+    measured, expected = exact["wobble period (days)"]
+    assert 300 < float(measured) < 310  # the run spans a period of ~304 days
+    assert relative_close(measured, expected, 1e-10), (measured, expected)
+    assert relative_close(*exact["wobble angle"], 1e-10)
+    assert relative_close(*exact["angular momentum"], 1e-12)
+    measured, expected = checks("axes")["wobble period (days)"]
+    assert not relative_close(measured, expected, 1e-3), (measured, expected)
+
+
+@pytest.mark.parametrize("split", SPLITS)
+@pytest.mark.parametrize("name", ["free", "heavy"])
+def test_float32_run_stays_float32(name, split):
+    """All coefficients (rates, the isotropic turn, kicks) follow the state's dtype;
+    the run agrees with float64 to float32 round-off and, free, keeps |Π| at that
+    level."""
+    body, args = BODIES[name]
+    y0 = body.state_from_angular_velocity(Q0, OMEGA0)
+    solver = RigidBodyYoshida4(free_body=split)
+
+    def run(y, system, arguments):
+        return lj.simulate(system, y, t1=1.0, dt=0.01, solver=solver, args=arguments)
+
+    narrow = run(*cast_floats((y0, body, args), jnp.float32))
+    wide = run(y0, body, args)
+    assert all(leaf.dtype == jnp.float32 for leaf in jax.tree.leaves(narrow.ys))
+    eps32 = float(np.finfo(np.float32).eps)
+    for a, b in zip(narrow.ys, wide.ys):
+        assert relative_close(a, b, 100 * eps32), float(jnp.max(jnp.abs(a - b)))
+    if name == "free":
+        norm = jnp.linalg.norm(narrow.ys[1][-1].astype(float))
+        assert abs(norm / jnp.linalg.norm(y0[1]) - 1) < 10 * eps32
+
+
+@pytest.mark.parametrize("split", SPLITS)
+def test_body_at_rest_stays_at_rest_with_finite_gradients(split):
+    """Π = 0: the isotropic turn's axis Π/|Π| is never formed (sinc form), so no NaN,
+    in the values or in reverse mode."""
+    solver, term = RigidBodyYoshida4(free_body=split), RigidBodyTerm(FREE)
+
+    def final(momentum):  # three steps, unrolled, so that reverse mode goes through
+        y = (Q0, momentum)
+        state = solver.init(term, 0.0, 0.1, y, None)
+        for t in (0.0, 0.1, 0.2):
+            y, _, _, state, _ = solver.step(term, t, t + 0.1, y, None, state, False)
+        return y
+
+    q, momentum = final(jnp.zeros(3))
+    assert np.array_equal(q, Q0) and np.array_equal(momentum, jnp.zeros(3))
+    weights = jnp.array([0.0, 1.0, 2.0, 3.0])
+    gradient = jax.grad(lambda p: final(p)[0] @ weights)(jnp.zeros(3))
+    assert np.all(np.isfinite(gradient)) and np.any(gradient != 0)
+
+
+def test_unknown_free_body_split_is_refused():
+    with pytest.raises(ValueError, match="free_body"):
+        RigidBodyVerlet(free_body="mclachlan")
