@@ -36,6 +36,7 @@ import numpy as np
 import optimistix as optx
 
 from .fixed_step import integrate_fixed_steps
+from .flat_state import flattened
 from .mechanics.hamiltonian import AbstractHamiltonian, SeparableHamiltonian
 from .mechanics.lagrangian import Lagrangian
 from .precision import cast_floats, working_dtype
@@ -303,6 +304,8 @@ def simulate(
     if _is_constrained(system):
         solver = _constrained_solver(solver)
     terms, state0, integrated = _terms_and_state(system, solver, y0, t0, args)
+    # One vector is what diffrax's loops run fastest (lagjax.flat_state).
+    terms, state0, flat = flattened(terms, state0, saveat)
     if dt is not None:
         solver = _with_implicit_tolerances(solver, rtol, atol)
     scan_path = (
@@ -347,6 +350,8 @@ def simulate(
             throw,
             dtype,
         )
+    if flat is not None:
+        ys = flat.unravel(ys)
     finite = _all_saved_states_finite(saved_ts, ys)
     if throw:
         ys = eqx.error_if(ys, ~finite, _NON_FINITE_MESSAGE)
