@@ -23,6 +23,10 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+# diffrax's default save function (the state itself); a user's own `fn` would be
+# handed flat vectors.
+_SAVE_STATE = diffrax.SaveAt(t1=True).subs.fn
+
 
 class FlatState(eqx.Module):
     """Ravel a state pytree into one vector and back (leading axes allowed)."""
@@ -76,7 +80,7 @@ def flattened(
         subs = saveat.subs
         if not isinstance(subs, diffrax.SubSaveAt):
             return unchanged  # several SubSaveAts: leave their outputs as they are
-        if subs.fn is not diffrax.SaveAt(t1=True).subs.fn:
+        if subs.fn is not _SAVE_STATE:
             return unchanged
     leaves = jax.tree_util.tree_leaves(state0)
     if len({jnp.result_type(leaf) for leaf in leaves}) != 1:

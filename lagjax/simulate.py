@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Any
+from typing import Any, NamedTuple
 
 import diffrax
 import equinox as eqx
@@ -308,48 +308,10 @@ def simulate(
     terms, state0, flat = flattened(terms, state0, saveat)
     if dt is not None:
         solver = _with_implicit_tolerances(solver, rtol, atol)
-    scan_path = (
-        dt is not None
-        and ts is None
-        and saveat is None
-        and adjoint is None
-        and not progress
-        and max_steps is None
-        and all(isinstance(x, (int, float)) for x in (t0, t1, dt))
-    )
-    if scan_path:
-        assert dt is not None
-        step = grid_step(t0, t1, dt, dtype)
-        y1, result, steps = integrate_fixed_steps(
-            terms, solver, t0, t1, step, state0, args, dtype
-        )
-        if throw:
-            y1 = result.error_if(y1, result != diffrax.RESULTS.successful)
-        saved_ts = jnp.asarray([t1], dtype=dtype)
-        ys = jax.tree_util.tree_map(lambda x: jnp.asarray(x)[None], y1)
-        counts = jnp.asarray(steps)
-        stats = dict(
-            num_steps=counts, num_accepted_steps=counts, num_rejected_steps=0 * counts
-        )
-    else:
-        saved_ts, ys, stats, result = _diffeqsolve(
-            terms,
-            solver,
-            state0,
-            t0,
-            t1,
-            dt,
-            ts,
-            args,
-            rtol,
-            atol,
-            max_steps,
-            progress,
-            saveat,
-            adjoint,
-            throw,
-            dtype,
-        )
+    run = _Run(t0, t1, dt, ts, rtol, atol, max_steps, progress, saveat, adjoint,
+               throw, dtype)  # fmt: skip
+    integrate = _integrate_scan if run.fits_scan() else _diffeqsolve
+    saved_ts, ys, stats, result = integrate(terms, solver, state0, args, run)
     if flat is not None:
         ys = flat.unravel(ys)
     finite = _all_saved_states_finite(saved_ts, ys)
@@ -390,31 +352,63 @@ _NON_FINITE_MESSAGE = (
 )
 
 
-def _diffeqsolve(
-    terms,
-    solver,
-    state0,
-    t0,
-    t1,
-    dt,
-    ts,
-    args,
-    rtol,
-    atol,
-    max_steps,
-    progress,
-    saveat,
-    adjoint,
-    throw,
-    dtype,
-):
+class _Run(NamedTuple):
+    """How `simulate` was asked to integrate: times, tolerances, saving, adjoint."""
+
+    t0: Any
+    t1: Any
+    dt: Any
+    ts: Any
+    rtol: float
+    atol: float
+    max_steps: int | None
+    progress: bool
+    saveat: diffrax.SaveAt | None
+    adjoint: diffrax.AbstractAdjoint | None
+    throw: bool
+    dtype: Any
+
+    def fits_scan(self) -> bool:
+        """Fixed steps, final state only, default adjoint: the plain-scan path."""
+        return (
+            self.dt is not None
+            and self.ts is None
+            and self.saveat is None
+            and self.adjoint is None
+            and not self.progress
+            and self.max_steps is None
+            and all(isinstance(x, (int, float)) for x in (self.t0, self.t1, self.dt))
+        )
+
+
+def _integrate_scan(terms, solver, state0, args, run: _Run):
+    """The fixed-step path: a `lax.scan` over the solver's step (`fixed_step.py`)."""
+    step = grid_step(run.t0, run.t1, run.dt, run.dtype)
+    y1, result, steps = integrate_fixed_steps(
+        terms, solver, run.t0, run.t1, step, state0, args, run.dtype
+    )
+    if run.throw:
+        y1 = result.error_if(y1, result != diffrax.RESULTS.successful)
+    saved_ts = jnp.asarray([run.t1], dtype=run.dtype)
+    ys = jax.tree_util.tree_map(lambda x: jnp.asarray(x)[None], y1)
+    counts = jnp.asarray(steps)
+    stats = dict(
+        num_steps=counts, num_accepted_steps=counts, num_rejected_steps=0 * counts
+    )
+    return saved_ts, ys, stats, result
+
+
+def _diffeqsolve(terms, solver, state0, args, run: _Run):
     """The general path: `diffrax.diffeqsolve` with saving, adjoints, adaptivity."""
-    controller, dt0 = _stepping(solver, t0, t1, dt, rtol, atol)
+    t0, t1, dt, ts, dtype = run.t0, run.t1, run.dt, run.ts, run.dtype
+    controller, dt0 = _stepping(solver, t0, t1, dt, run.rtol, run.atol)
+    max_steps = run.max_steps
     if max_steps is None:
         max_steps = _fixed_step_count(t0, t1, dt) or 100_000
     # diffrax promotes the state to the dtype of the times: give it the state's.
     t0, t1 = jnp.asarray(t0, dtype=dtype), jnp.asarray(t1, dtype=dtype)
     dt0 = None if dt0 is None else jnp.asarray(dt0, dtype=dtype)
+    saveat = run.saveat
     if saveat is None:
         saveat = diffrax.SaveAt(ts=ts) if ts is not None else diffrax.SaveAt(t1=True)
     solution = diffrax.diffeqsolve(
@@ -428,13 +422,13 @@ def _diffeqsolve(
         saveat=saveat,
         stepsize_controller=controller,
         max_steps=max_steps,
-        adjoint=adjoint
-        if adjoint is not None
-        else diffrax.RecursiveCheckpointAdjoint(),
+        adjoint=diffrax.RecursiveCheckpointAdjoint()
+        if run.adjoint is None
+        else run.adjoint,
         progress_meter=diffrax.TextProgressMeter()
-        if progress
+        if run.progress
         else diffrax.NoProgressMeter(),
-        throw=throw,
+        throw=run.throw,
     )
     if solution.ts is None or solution.ys is None:
         raise ValueError("saveat must save at least one state (t0, t1, ts or steps)")
