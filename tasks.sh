@@ -33,6 +33,6 @@ case "$cmd" in
     # Two pytest workers by default (the CI machine has 2 cores); LAGJAX_TEST_WORKERS=0
     # runs in one process.
     test) setup test; exec "$VENV/bin/python" -m pytest -n "${LAGJAX_TEST_WORKERS:-2}" "$@" ;;
-    bench) setup "test,bench"; exec "$VENV/bin/python" benchmarks/derivation_overhead.py "$@" ;;
+    bench) setup "test,bench"; exec "$VENV/bin/python" -m benchmarks.derivation_overhead "$@" ;;
     *) echo "usage: bash tasks.sh {demo|test|bench} [args...]" >&2; exit 2 ;;
 esac

@@ -8,7 +8,7 @@ matrix form (`qd @ M(q) @ qd`), with `check=False` as integration loops call it,
 once with the default `check=True` (a run-time singular-mass-matrix branch per call). Compile time is reported apart from run time; run
 time is the median of repeats after a warm-up, with `block_until_ready`.
 
-Run: `python benchmarks/derivation_overhead.py [--steps N] [--batch B] [--repeats R]`.
+Run: `python -m benchmarks.derivation_overhead [--steps N] [--batch B] [--repeats R]`.
 """
 
 from __future__ import annotations

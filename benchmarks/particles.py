@@ -17,7 +17,7 @@ Each is timed as one jit-compiled evaluation and inside a hand-written St√∂rmer‚
 same system is timed too. Run time is the median of `--repeats` runs after a warm-up
 (compile excluded, `block_until_ready`). Ratios are against (a).
 
-Run: `python benchmarks/particles.py [--bodies N] [--steps S] [--repeats R]`.
+Run: `python -m benchmarks.particles [--bodies N] [--steps S] [--repeats R]`.
 """
 
 from __future__ import annotations

@@ -21,7 +21,7 @@ final $(R, \boldsymbol\omega)$ against Dopri8 at rtol $10^{-14}$ (floor: its dis
 from rtol $10^{-13}$). A hand-written twin, `RigidBodyVerlet` in a plain
 `jax.lax.scan` (axes split), gives the overhead of the solver inside `lj.simulate`.
 
-    python benchmarks/rigid_long_horizon.py [--quick] [--out DIR]
+    python -m benchmarks.rigid_long_horizon [--quick] [--out DIR]
 
 Writes `rigid_long_horizon.{csv,json,png,md}` to `--out` (default
 `benchmarks/results/`).
@@ -50,9 +50,9 @@ jax.config.update("jax_enable_x64", True)
 import diffrax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
-from rigid_long_horizon_report import LIE_POISSON, point_table, write  # noqa: E402
 
 import lagjax as lj  # noqa: E402
+from benchmarks.rigid_long_horizon_report import LIE_POISSON, point_table, write  # noqa: E402
 from lagjax import diagnostics  # noqa: E402
 from lagjax.rigid import quaternion_to_matrix, skew  # noqa: E402
 from lagjax.scenes.rigid import TorqueFreeBody  # noqa: E402

@@ -21,7 +21,7 @@ chunk): `jax.vmap` of `lj.simulate` against `jax.vmap` of a hand-written
 The size study is in `scaling_size.py`, the batch study in `scaling_throughput.py`;
 this file runs both and writes their CSV files, figure and summary.
 
-    python benchmarks/scaling.py [--quick] [--out DIR]
+    python -m benchmarks.scaling [--quick] [--out DIR]
 
 References: SymPy documentation, `sympy.physics.mechanics.LagrangesMethod`;
 JAX documentation, automatic vectorization (`jax.vmap`).
@@ -31,11 +31,8 @@ from __future__ import annotations
 
 import argparse
 import csv
-import sys
 import time
 from pathlib import Path
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import jax
 
@@ -45,8 +42,9 @@ import matplotlib  # noqa: E402
 
 matplotlib.use("Agg")  # files only, no display
 import matplotlib.pyplot as plt  # noqa: E402
-from scaling_size import TOLERANCE, chain_scaling, pendulum_scaling  # noqa: E402
-from scaling_throughput import THROUGHPUT_STEPS, throughput  # noqa: E402
+
+from benchmarks.scaling_size import TOLERANCE, chain_scaling, pendulum_scaling  # noqa: E402
+from benchmarks.scaling_throughput import THROUGHPUT_STEPS, throughput  # noqa: E402
 
 
 def _write_csv(path: Path, rows: list[dict]) -> None:

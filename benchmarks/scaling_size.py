@@ -21,9 +21,9 @@ from typing import Any
 import diffrax
 import jax.numpy as jnp
 import numpy as np
-import peers
 
 import lagjax as lj
+from benchmarks import peers
 from lagjax import diagnostics
 from lagjax.scenes.chains import FermiPastaUlamChain
 

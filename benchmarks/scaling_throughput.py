@@ -16,9 +16,9 @@ from typing import Any
 import diffrax
 import jax
 import jax.numpy as jnp
-import peers
 
 import lagjax as lj
+from benchmarks import peers
 from lagjax import diagnostics
 from lagjax.scenes.pendulums import DoublePendulum
 

@@ -12,7 +12,7 @@ compensated solvers, with the same Kahan-summed increments. Compile time is
 measured separately from run time (median of repeats after a warm-up, the two
 variants run alternately so a busy machine slows both alike).
 
-    python benchmarks/solver_overhead.py [--steps N] [--batch B] [--repeats R]
+    python -m benchmarks.solver_overhead [--steps N] [--batch B] [--repeats R]
 """
 
 import argparse

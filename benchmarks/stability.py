@@ -32,7 +32,7 @@ what a case measured where the error alone does not (a rate, an exponent).
 `--quick` runs a subset and skips the energy-error runs (`energy` is NaN there).
 Prints the table and writes `stability.csv` and `stability.json` to `--out`.
 
-    python benchmarks/stability.py [--quick] [--out DIR]
+    python -m benchmarks.stability [--quick] [--out DIR]
 
 References: Hairer & Wanner, *Solving Ordinary Differential Equations II*, 2nd ed.,
 Springer 1996, §IV.1–IV.3 (stiffness, A- and L-stability); Hairer, Lubich & Wanner,
@@ -49,23 +49,21 @@ import json
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))  # the stability_* modules
-
 import jax
 
 jax.config.update("jax_enable_x64", True)
 
-from stability_brouwer import brouwer_study  # noqa: E402
-from stability_engine import ROW_KEYS, Case, Study  # noqa: E402
-from stability_extreme import (  # noqa: E402
+from benchmarks.stability_brouwer import brouwer_study  # noqa: E402
+from benchmarks.stability_engine import ROW_KEYS, Case, Study  # noqa: E402
+from benchmarks.stability_extreme import (  # noqa: E402
     PeriodCheck,
     foucault_study,
     near_collision_kepler_case,
     separatrix_pendulum_case,
 )
-from stability_float32 import precision_study  # noqa: E402
-from stability_lyapunov import lyapunov_study  # noqa: E402
-from stability_stiff import (  # noqa: E402
+from benchmarks.stability_float32 import precision_study  # noqa: E402
+from benchmarks.stability_lyapunov import lyapunov_study  # noqa: E402
+from benchmarks.stability_stiff import (  # noqa: E402
     eccentric_kepler_case,
     fpu_case,
     gimbal_lock_case,

@@ -63,9 +63,9 @@ import diffrax
 import jax
 import jax.numpy as jnp
 import numpy as np
-from stability_engine import Measured, judged_row
 
 import lagjax as lj
+from benchmarks.stability_engine import Measured, judged_row
 from lagjax import diagnostics
 from lagjax.scenes.oscillators import HarmonicOscillator
 from lagjax.step_grid import grid_step

@@ -29,9 +29,9 @@ import diffrax
 import jax
 import jax.numpy as jnp
 import numpy as np
-from stability_engine import Attempt, Case, Measured, judged_row
 
 import lagjax as lj
+from benchmarks.stability_engine import Attempt, Case, Measured, judged_row
 from lagjax import diagnostics
 from lagjax.scenes.central import KeplerCartesian
 from lagjax.scenes.earth import FoucaultPendulum

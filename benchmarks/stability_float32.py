@@ -37,9 +37,9 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
-from stability_engine import Measured, judged_row
 
 import lagjax as lj
+from benchmarks.stability_engine import Measured, judged_row
 from lagjax import diagnostics
 from lagjax.precision import cast_floats
 from lagjax.scenes import catalog

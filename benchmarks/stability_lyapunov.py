@@ -43,9 +43,9 @@ from dataclasses import dataclass, field
 import diffrax
 import jax
 import jax.numpy as jnp
-from stability_engine import Attempt, Measured, judged_row
 
 import lagjax as lj
+from benchmarks.stability_engine import Attempt, Measured, judged_row
 from lagjax import diagnostics
 from lagjax.scenes.pendulums import DoublePendulum
 

@@ -24,9 +24,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
-from stability_engine import Attempt, Case
 
 import lagjax as lj
+from benchmarks.stability_engine import Attempt, Case
 from lagjax.rigid import quaternion_to_matrix
 from lagjax.rigid.euler_angles import (
     euler_zxz_body_angular_velocity,

@@ -20,7 +20,7 @@ Writes to `--out` (default `benchmarks/results/`): `work_precision.csv`,
 `report.json`, one `wp_<scene>.png` per scene and `summary.md` (the fastest method
 per scene and error level, peer ratios), plus what `scaling.py` writes.
 
-    python benchmarks/work_precision.py [--quick] [--out DIR] [--skip-scaling]
+    python -m benchmarks.work_precision [--quick] [--out DIR] [--skip-scaling]
 
 References: Hairer, Nørsett & Wanner, *Solving Ordinary Differential Equations I*,
 2nd ed., §II.10 (work-precision diagrams); Hairer, Lubich & Wanner, *Geometric
@@ -34,15 +34,13 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))  # peers, scaling, wp_*
-
 import jax
 
 jax.config.update("jax_enable_x64", True)
 
-from wp_cases import build_cases  # noqa: E402
-from wp_measure import run_case  # noqa: E402
-from wp_report import write_report  # noqa: E402
+from benchmarks.wp_cases import build_cases  # noqa: E402
+from benchmarks.wp_measure import run_case  # noqa: E402
+from benchmarks.wp_report import write_report  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -65,7 +63,7 @@ def main(argv: list[str] | None = None) -> int:
         titles[case.key] = case.title
     studies: dict = {}
     if not options.skip_scaling:
-        import scaling
+        from benchmarks import scaling
 
         studies = scaling.run_all(options.out, quick, timing)
     write_report(options.out, records, floors, titles, studies, quick)

@@ -21,9 +21,9 @@ import diffrax
 import jax
 import jax.numpy as jnp
 import numpy as np
-import peers
 
 import lagjax as lj
+from benchmarks import peers
 from lagjax.rigid import quaternion_to_matrix
 from lagjax.scenes.base import AbstractScene
 from lagjax.scenes.central import KeplerCartesian

@@ -19,10 +19,10 @@ import diffrax
 import jax
 import jax.numpy as jnp
 import numpy as np
-from wp_cases import Case
-from wp_methods import Method, all_methods, lagjax_method
 
 import lagjax as lj
+from benchmarks.wp_cases import Case
+from benchmarks.wp_methods import Method, all_methods, lagjax_method
 from lagjax import diagnostics
 
 REFERENCE_RTOL = (1e-13, 1e-14)

@@ -19,10 +19,10 @@ import diffrax
 import jax
 import jax.numpy as jnp
 import numpy as np
-import peers
-from wp_cases import Case
 
 import lagjax as lj
+from benchmarks import peers
+from benchmarks.wp_cases import Case
 from lagjax import diagnostics
 
 ENERGY_SAMPLES = 200  # stratified random save times (diagnostics.sample_times)

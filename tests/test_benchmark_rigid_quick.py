@@ -1,4 +1,4 @@
-"""`benchmarks/rigid_long_horizon.py --quick`: it runs, and its numbers are physics.
+"""`python -m benchmarks.rigid_long_horizon --quick`: it runs, and its numbers are physics.
 
 The script runs once, as a subprocess, into a temporary folder; the tests then check
 what it wrote: the Lie–Poisson splittings keep |L| to round-off while the projected
@@ -29,9 +29,10 @@ NAMES += ("rigid_long_horizon.md", "rigid_long_horizon.png")
 @pytest.fixture(scope="module")
 def results(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("rigid_long_horizon")
-    script = ROOT / "benchmarks" / "rigid_long_horizon.py"
+    module = "benchmarks.rigid_long_horizon"
     run = subprocess.run(
-        [sys.executable, str(script), "--quick", "--out", str(out)],
+        [sys.executable, "-m", module, "--quick", "--out", str(out)],
+        cwd=ROOT,
         capture_output=True,
         text=True,
         timeout=300,

@@ -26,7 +26,7 @@ import pytest
 from lagjax import diagnostics
 
 ROOT = Path(__file__).resolve().parent.parent
-SCRIPTS = ("work_precision.py", "stability.py")
+SCRIPTS = ("work_precision", "stability")  # modules of the benchmarks package
 
 
 @pytest.fixture(scope="module")
@@ -36,7 +36,8 @@ def results(tmp_path_factory) -> Path:
         subprocess.Popen(
             [
                 sys.executable,
-                str(ROOT / "benchmarks" / name),
+                "-m",
+                f"benchmarks.{name}",
                 "--quick",
                 "--out",
                 str(out),
@@ -44,6 +45,7 @@ def results(tmp_path_factory) -> Path:
             stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT,
             text=True,
+            cwd=ROOT,
         )
         for name in SCRIPTS
     ]
