@@ -47,13 +47,63 @@ def positional_arity(fn: Callable, *, minimum: int, maximum: int, what: str) -> 
 
 
 def call_with_arity(fn: Callable, arity: int, *arguments: Any) -> Any:
-    """Call `fn` with the first `arity` of `arguments`."""
-    return fn(*arguments[:arity])
+    """Call `fn` with the first `arity` of `arguments`.
+
+    lagjax traces user functions with abstract values (under `jit`, `grad`,
+    `vmap`), so Python control flow on them and NumPy calls fail inside JAX with a
+    long message about tracers. Those errors are re-raised here as a `TypeError`
+    that names the user's function and the fix (`jnp.where`/`lax.cond`, `jnp`).
+    """
+    try:
+        return fn(*arguments[:arity])
+    except jax.errors.TracerBoolConversionError as error:
+        raise TypeError(
+            f"{_name_of(fn)} uses a Python `if`, `while`, `and`/`or` or `bool()` on a "
+            "value that depends on its arguments (q, q̇, p, t, args); lagjax traces it "
+            "with abstract values, so the branch cannot be chosen in Python. Write "
+            "the branch as jnp.where(condition, a, b) (both sides are evaluated) or "
+            "jax.lax.cond(condition, f_true, f_false, operands)"
+        ) from error
+    except jax.errors.TracerArrayConversionError as error:
+        raise TypeError(
+            f"{_name_of(fn)} calls NumPy (np.cos, np.array, math.sin, float(), …) on "
+            "a value that depends on its arguments; lagjax differentiates and "
+            "compiles it with JAX, so use jax.numpy instead: import jax.numpy as jnp "
+            "and write jnp.cos, jnp.array, …"
+        ) from error
+    except jax.errors.ConcretizationTypeError as error:
+        raise TypeError(
+            f"{_name_of(fn)} needs the concrete value of one of its arguments (a "
+            "float(), int(), math function, shape, Python index or loop bound of q, q̇, p, t or "
+            "args); under lagjax's tracing only jax.numpy operations on them work: "
+            "use jnp functions and fixed shapes"
+        ) from error
+
+
+def _name_of(fn: Callable) -> str:
+    """'the function name (file.py:line)' for messages about a user function."""
+    name = getattr(fn, "__qualname__", None) or type(fn).__name__
+    code = getattr(fn, "__code__", None)
+    where = (
+        ""
+        if code is None
+        else f" ({code.co_filename.rsplit('/', 1)[-1]}:{code.co_firstlineno})"
+    )
+    return f"the function {name}{where}"
 
 
 def check_scalar(value: Any, what: str) -> jax.Array:
     """Trace-time check that a user function returned one real scalar."""
-    value = jnp.asarray(value)
+    if value is None:
+        raise ValueError(
+            f"{what} returned None: it must return a scalar (is a `return` missing?)"
+        )
+    try:
+        value = jnp.asarray(value)
+    except TypeError as error:
+        raise ValueError(
+            f"{what} must return a real scalar, but returned a {type(value).__name__}"
+        ) from error
     if value.shape != ():
         raise ValueError(
             f"{what} must return a scalar, but returned an array of shape {value.shape}"

@@ -24,14 +24,40 @@ Hairer, Lubich & Wanner, *Geometric Numerical Integration*, 2nd ed., §VII.5.
 
 from __future__ import annotations
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
+from jax.core import Tracer
 
 
 def _check_quaternion(q: jax.Array) -> jax.Array:
     q = jnp.asarray(q)
     if q.shape[-1:] != (4,):
         raise ValueError(f"a quaternion has shape (..., 4), got {q.shape}")
+    return q
+
+
+def check_nonzero_quaternion(q: jax.Array, what: str = "the quaternion") -> jax.Array:
+    r"""`q`, after checking that it can stand for a rotation: finite and not zero.
+
+    A zero quaternion is no rotation at all, and it stays zero under
+    $\dot q = \tfrac12 q \otimes (0, \boldsymbol\omega)$ (a silent q = 0 run).
+    A concrete value is checked at once (`ValueError`); a traced one at run time
+    (`eqx.error_if`). Any other length is accepted: the rotation of $q/|q|$ is meant.
+    """
+    q = _check_quaternion(q)
+    remedy = "use a unit quaternion, e.g. (1, 0, 0, 0) for the identity"
+    if isinstance(q, Tracer):
+        norm = jnp.sum(q * q, axis=-1)
+        bad = ~(jnp.isfinite(norm) & (norm > 0))
+        return eqx.error_if(q, jnp.any(bad), f"{what} is zero or not finite: {remedy}")
+    values = np.asarray(q)
+    norms = np.sum(values * values, axis=-1)
+    if not np.all(np.isfinite(norms)):
+        raise ValueError(f"{what} is not finite ({values}): {remedy}")
+    if np.any(norms == 0):
+        raise ValueError(f"{what} is zero, which is no rotation: {remedy}")
     return q
 
 
