@@ -56,7 +56,7 @@ from benchmarks.rigid_long_horizon_report import LIE_POISSON, point_table, write
 from lagjax import diagnostics  # noqa: E402
 from lagjax.rigid import quaternion_to_matrix, skew  # noqa: E402
 from lagjax.scenes.rigid import TorqueFreeBody  # noqa: E402
-from lagjax.solvers.rigid import (  # noqa: E402
+from lagjax.solvers.lie_poisson import (  # noqa: E402
     QuaternionProjection,
     RigidBodyVerlet,
     RigidBodyYoshida4,

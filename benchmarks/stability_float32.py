@@ -44,7 +44,7 @@ from lagjax import diagnostics
 from lagjax.precision import cast_floats
 from lagjax.scenes import catalog
 from lagjax.scenes.rigid import SCENES as RIGID_SCENES
-from lagjax.solvers.rigid import RigidBodyYoshida4
+from lagjax.solvers.lie_poisson import RigidBodyYoshida4
 
 TOLERANCE = 1e-3
 NOT_CONSERVED = 1e-3  # a float64 energy change above this is physics, not error

@@ -36,7 +36,7 @@ from lagjax.scenes.central import KeplerCartesian
 from lagjax.scenes.chains import FermiPastaUlamChain
 from lagjax.scenes.pendulums import SimplePendulum
 from lagjax.scenes.rigid import TorqueFreeBody
-from lagjax.solvers.rigid import RigidBodyYoshida4
+from lagjax.solvers.lie_poisson import RigidBodyYoshida4
 
 # Gauss–Legendre's default fixed-point stage solver needs h·Lip(f) < 1; Newton does
 # not (its residual test is absolute, so atol sits above the round-off, see

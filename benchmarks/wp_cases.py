@@ -31,7 +31,7 @@ from lagjax.scenes.chains import FermiPastaUlamChain
 from lagjax.scenes.earth import FoucaultPendulum
 from lagjax.scenes.pendulums import DoublePendulum, SimplePendulum
 from lagjax.scenes.rigid import TorqueFreeBody
-from lagjax.solvers.rigid import (
+from lagjax.solvers.lie_poisson import (
     QuaternionProjection,
     RigidBodyVerlet,
     RigidBodyYoshida4,

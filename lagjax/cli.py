@@ -31,7 +31,7 @@ from . import scenes as scene_catalog  # noqa: E402
 from .simulate import simulate  # noqa: E402
 from .solvers.implicit import GaussLegendre, ImplicitMidpoint  # noqa: E402
 from .solvers.rattle import Rattle  # noqa: E402
-from .solvers.rigid import RigidBodyVerlet, RigidBodyYoshida4  # noqa: E402
+from .solvers.lie_poisson import RigidBodyVerlet, RigidBodyYoshida4  # noqa: E402
 from .solvers.splitting import (  # noqa: E402
     BlanesMoan4,
     KahanLi8,

@@ -56,28 +56,26 @@ import numpy as np
 from .mechanics.hamiltonian import AbstractHamiltonian
 from .mechanics.lagrangian import Lagrangian
 from .mechanics.legendre import tree_dot
-from .scenes.base import AbstractScene
+from .system import AbstractSystem
 from .trajectory import Trajectory
 
-System = Lagrangian | AbstractHamiltonian | AbstractScene
+System = AbstractSystem
 
 # Three nodes integrate the Hermite interpolant's action to O(h⁶), which is what the
 # interpolation itself achieves on a true path; more nodes would not raise the order.
 DEFAULT_NODES = 3
 
 
-def resolve_system(
-    system: System, args: Any
-) -> tuple[Lagrangian | AbstractHamiltonian, Any]:
+def resolve_system(system: System, args: Any) -> tuple[AbstractSystem, Any]:
     """The mechanical system and its args; a scene gives its system and itself as
-    args (as `simulate` does)."""
-    if isinstance(system, AbstractScene):
-        return system.system(), system if args is None else args
-    if not isinstance(system, (Lagrangian, AbstractHamiltonian)):
+    args (as `simulate` does). Refuses systems without an action functional."""
+    if not isinstance(system, AbstractSystem):
         raise TypeError(
             "the action needs a Lagrangian, a Hamiltonian or a scene; got "
             f"{type(system).__name__}"
         )
+    system, args = system.resolve(args)
+    system.path_lagrangian()  # raises for systems with no action (a RigidBody)
     return system, args
 
 
@@ -150,7 +148,7 @@ def action_of_path(
     **References:** the course text §3.6, eq. 3.100–3.103.
     """
     system, args = resolve_system(system, args)
-    lagrangian = system if isinstance(system, Lagrangian) else system.to_lagrangian()
+    lagrangian = system.path_lagrangian()
     fractions = jnp.arange(intervals + 1) / intervals
     edges = t0 + (t1 - t0) * fractions
     panels = jax.vmap(lambda a, b: _path_action(lagrangian, path, a, b, args, nodes))(
@@ -208,7 +206,7 @@ def _fill_padding(trajectory: Trajectory) -> Trajectory:
 
 def _interval_actions_single(system, nodes, ts, values, slopes, args):
     """Action over each interval of one (unbatched) saved trajectory."""
-    if isinstance(system, AbstractHamiltonian):
+    if system.second_is_momentum:
         q, p = values
         slopes = jax.vmap(system.vector_field, in_axes=(0, 0, 0, None))(q, p, ts, args)
     # Padded intervals have zero width: a dummy unit width keeps them finite.
@@ -223,7 +221,7 @@ def _interval_actions_single(system, nodes, ts, values, slopes, args):
 
     def one_interval(a, b, value_a, slope_a, value_b, slope_b):
         path = _hermite(a, b, value_a, slope_a, value_b, slope_b)
-        if isinstance(system, AbstractHamiltonian):
+        if system.second_is_momentum:
             return _phase_space_path_action(system, path, a, b, args, nodes)
         return _path_action(system, path, a, b, args, nodes)
 
@@ -241,7 +239,7 @@ def _interval_actions(system: System, trajectory: Trajectory, nodes: int) -> jax
             "n)) on the step grid of a fixed-step solver"
         )
     trajectory = _fill_padding(trajectory)
-    if isinstance(system, Lagrangian):
+    if not system.second_is_momentum:
         values, slopes = trajectory.q, trajectory.qdot
     else:
         # Slopes come from `system`'s own Hamilton equations, inside the map.

@@ -34,15 +34,14 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
-from .mechanics.lagrangian import Lagrangian
-from .simulate import simulate
-from .trajectory import Trajectory
-from .variational_principles import (
+from .hamilton_principle import (
     DEFAULT_NODES,
     System,
     action,
     resolve_system,
 )
+from .simulate import simulate
+from .trajectory import Trajectory
 
 # The Newton iteration solves the end-point miss to round-off.
 _SHOOTING_TOLERANCE = 1e-12
@@ -52,9 +51,9 @@ _SHOOTING_MAX_STEPS = 32
 def _straight_line_start(system, q0, q1, t0, t1, args):
     """The second initial-state component of the uniform straight line q0 → q1."""
     velocity = jax.tree_util.tree_map(lambda a, b: (b - a) / (t1 - t0), q0, q1)
-    if isinstance(system, Lagrangian):
+    if not system.second_is_momentum:
         return velocity
-    return system.to_lagrangian().momentum(q0, velocity, t0, args)
+    return system.path_lagrangian().momentum(q0, velocity, t0, args)
 
 
 def _forward_differentiable(solver: Any) -> Any:

@@ -13,7 +13,8 @@ One entry point for every system and solver:
 | constrained `Lagrangian` | any non-partitioned diffrax solver, wrapped in `ConstraintProjection` | (q, q̇), `ConstrainedLagrangianTerm` |
 | constrained `Lagrangian` | `Rattle` (holonomic, constant mass matrix) | (q, p), `RattleTerm` |
 
-A solver is *partitioned* when its diffrax `term_structure` is a pair of terms
+Which terms and state each system gets for a solver is the system's own answer
+(`lagjax.system.AbstractSystem.integration`). A solver is *partitioned* when its diffrax `term_structure` is a pair of terms
 (lagjax's splitting methods and diffrax's `SemiImplicitEuler`). With `dt` the steps are
 fixed; without it the solver must be adaptive and `rtol`/`atol` control the error.
 Only the final state is saved unless `ts` (or `saveat`) asks for more. Fixed steps
@@ -37,143 +38,13 @@ import optimistix as optx
 
 from .fixed_step import integrate_fixed_steps
 from .flat_state import flattened
-from .mechanics.hamiltonian import AbstractHamiltonian, SeparableHamiltonian
-from .mechanics.lagrangian import Lagrangian
 from .precision import cast_floats, working_dtype
-from .rigid.body import RigidBody
-from .rigid.term import RigidBodyTerm
-from .scenes.base import AbstractScene
-from .solvers.implicit import AbstractGaussLegendre
-from .solvers.projection import ConstrainedLagrangianTerm, ConstraintProjection
-from .solvers.rattle import Rattle, RattleTerm
-from .solvers.rigid import QuaternionProjection, RigidBodyYoshida4
-from .solvers.splitting import Yoshida4
-from .solvers.variational import LagrangianTerm
 from .step_grid import grid_step
+from .system import AbstractSystem
 from .trajectory import Trajectory
-from .vector_fields import (
-    HamiltonVectorField,
-    LagrangianVectorField,
-    SeparableDrift,
-    SeparableKick,
-)
+from .validation import check_simulate_inputs
 
-MechanicalSystem = Lagrangian | AbstractHamiltonian | RigidBody
-System = MechanicalSystem | AbstractScene
-
-
-def is_partitioned(solver: diffrax.AbstractSolver) -> bool:
-    """True for solvers that step (q, p) with two terms (splitting methods)."""
-    structure = solver.term_structure
-    return isinstance(structure, tuple) and len(structure) == 2
-
-
-def default_solver(system: MechanicalSystem, dt: Any) -> diffrax.AbstractSolver:
-    """Pick a solver from the system's structure (recorded in `Trajectory.stats`).
-
-    Fixed step (`dt` given): a separable Hamiltonian gets `Yoshida4` (explicit,
-    symplectic, order 4); a `RigidBody` `RigidBodyYoshida4` (Lie–Poisson splitting);
-    anything else `GaussLegendre(stages=2)` (implicit, symplectic, order 4).
-    Adaptive (`dt` None): `Tsit5` with error control (on a rigid body with the
-    quaternion projected back to unit length). A constrained `Lagrangian` gets
-    `Tsit5` projected onto its constraints after each step, fixed step or not.
-    """
-    from .solvers.implicit import GaussLegendre
-
-    if _is_constrained(system):
-        return ConstraintProjection(diffrax.Tsit5())
-
-    if isinstance(system, RigidBody):
-        return (
-            RigidBodyYoshida4()
-            if dt is not None
-            else QuaternionProjection(diffrax.Tsit5())
-        )
-    if dt is None:
-        return diffrax.Tsit5()
-    if isinstance(system, SeparableHamiltonian):
-        return Yoshida4()
-    return GaussLegendre(stages=2)
-
-
-def _is_constrained(system: MechanicalSystem) -> bool:
-    return isinstance(system, Lagrangian) and system.constraints is not None
-
-
-def _constrained_solver(solver: diffrax.AbstractSolver) -> diffrax.AbstractSolver:
-    """The solver for a constrained Lagrangian: plain ones get the projection."""
-    if isinstance(solver, (ConstraintProjection, Rattle)):
-        return solver
-    structure_preserving = (
-        is_partitioned(solver)
-        or isinstance(solver, AbstractGaussLegendre)
-        or solver.term_structure is LagrangianTerm
-    )
-    if structure_preserving or not isinstance(solver.term_structure, type):
-        raise ValueError(
-            f"{type(solver).__name__} does not enforce constraints. Integrate a "
-            "constrained Lagrangian with an (explicit or implicit) diffrax solver, "
-            "which simulate projects onto the constraints after each step, or with "
-            "Rattle (holonomic constraints, constant mass matrix)."
-        )
-    return ConstraintProjection(solver)
-
-
-def _terms_and_state(system: MechanicalSystem, solver, y0, t0, args):
-    """diffrax terms, initial state and the system that state belongs to."""
-    if _is_constrained(system):
-        assert isinstance(system, Lagrangian)
-        if solver.term_structure is not RattleTerm:
-            return ConstrainedLagrangianTerm(system), y0, system
-        q0, qdot0 = y0
-        state0 = (q0, system.momentum(q0, qdot0, t0, args))
-        return RattleTerm(system), state0, system.to_hamiltonian()
-    if isinstance(system, RigidBody):
-        return RigidBodyTerm(system), y0, system
-    if solver.term_structure is LagrangianTerm:
-        if not isinstance(system, Lagrangian):
-            raise ValueError(
-                f"{type(solver).__name__} discretizes a Lagrangian; got "
-                f"{type(system).__name__}. Use .to_lagrangian() or another solver."
-            )
-        if system.force is not None or system.dissipation is not None:
-            raise ValueError(
-                f"{type(solver).__name__} discretizes the conservative action only; "
-                "this Lagrangian has a force or dissipation. Use GaussLegendre or an "
-                "adaptive solver."
-            )
-        q0, qdot0 = y0
-        state0 = (q0, system.momentum(q0, qdot0, t0, args))
-        return LagrangianTerm(system), state0, system.to_hamiltonian()
-    if isinstance(system, Lagrangian) and not isinstance(solver, AbstractGaussLegendre):
-        if is_partitioned(solver):
-            raise ValueError(
-                f"{type(solver).__name__} is a splitting method for separable "
-                "Hamiltonians H = T(p) + V(q); integrate a Lagrangian with an implicit "
-                "symplectic method (GaussLegendre, ImplicitMidpoint) or an adaptive one."
-            )
-        return diffrax.ODETerm(LagrangianVectorField(system)), y0, system
-    if isinstance(system, Lagrangian):
-        hamiltonian = system.to_hamiltonian()
-        q0, qdot0 = y0
-        state0 = (q0, system.momentum(q0, qdot0, t0, args))
-        return _hamiltonian_terms(hamiltonian, solver), state0, hamiltonian
-    return _hamiltonian_terms(system, solver), y0, system
-
-
-def _hamiltonian_terms(system: AbstractHamiltonian, solver):
-    if is_partitioned(solver):
-        if not isinstance(system, SeparableHamiltonian):
-            raise ValueError(
-                f"{type(solver).__name__} is a splitting method and needs a "
-                "SeparableHamiltonian(T, V); for a general H use GaussLegendre, "
-                "ImplicitMidpoint or an adaptive diffrax solver."
-            )
-        return (
-            diffrax.ODETerm(SeparableDrift(system)),
-            diffrax.ODETerm(SeparableKick(system)),
-        )
-    return diffrax.ODETerm(HamiltonVectorField(system))
+System = AbstractSystem
 
 
 def _with_implicit_tolerances(
@@ -269,13 +140,14 @@ def simulate(
     """Integrate `system` from `y0` over [t0, t1].
 
     **Arguments:**
-    - `system`: a `Lagrangian`, `Hamiltonian`, `SeparableHamiltonian` (or
-      `LegendreHamiltonian`), or a scene (`lagjax.scenes`), whose parameters are
-      then passed as `args`.
+    - `system`: any `AbstractSystem`: a `Lagrangian`, `Hamiltonian`,
+      `SeparableHamiltonian` (or `LegendreHamiltonian`), `RigidBody`, or a scene
+      (`lagjax.scenes`), whose parameters are then passed as `args` unless `args`
+      is given.
     - `y0`: `(q0, qdot0)` for a Lagrangian, `(q0, p0)` for a Hamiltonian.
     - `dt`: fixed step; None for adaptive stepping with `rtol`, `atol`.
     - `solver`: any diffrax solver or lagjax solver; None picks one by structure
-      (see `default_solver`) and records it in `stats["solver"]`.
+      (the system's `default_solver`) and records it in `stats["solver"]`.
     - `ts`: times to save at; default only the final state. `saveat` overrides.
     - `max_steps`: default: the exact count for fixed steps, 10⁵ adaptive.
     - `progress`: show diffrax's text progress meter.
@@ -285,11 +157,16 @@ def simulate(
       state). With False the trajectory up to the failure is returned and
       `result`/`stats["finite"]` say what happened.
     """
+    y0 = check_simulate_inputs(system, y0, t0, t1, dt, solver, ts, args, max_steps)
     t0, t1, dt = (_as_python_number(x) for x in (t0, t1, dt))
     _check_times(t0, t1, dt)
-    if isinstance(system, AbstractScene):
-        # A scene's parameters are its fields; its physics reads them from args.
-        system, args = system.system(), system
+    if not isinstance(system, AbstractSystem):
+        raise TypeError(
+            "simulate needs a lagjax system (Lagrangian, Hamiltonian, "
+            f"SeparableHamiltonian, RigidBody or a scene); got {type(system).__name__}"
+        )
+    # A scene's parameters are its fields; its physics reads them from args.
+    system, args = system.resolve(args)
     # The run works in y0's precision; float inputs follow it (lagjax.precision).
     dtype = working_dtype(y0)
     y0, system, args = (
@@ -300,10 +177,9 @@ def simulate(
     if ts is not None:
         ts = jnp.asarray(ts, dtype=dtype)
     if solver is None:
-        solver = default_solver(system, dt)
-    if _is_constrained(system):
-        solver = _constrained_solver(solver)
-    terms, state0, integrated = _terms_and_state(system, solver, y0, t0, args)
+        solver = system.default_solver(dt)
+    solver = system.adapt_solver(solver)
+    terms, state0, integrated = system.integration(solver, y0, t0, args)
     # One vector is what diffrax's loops run fastest (lagjax.flat_state).
     terms, state0, flat = flattened(terms, state0, saveat)
     if dt is not None:

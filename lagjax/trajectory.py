@@ -2,7 +2,8 @@
 
 Only the integrated state is stored — (q, q̇) for a Lagrangian integrated directly,
 (q, p) for a Hamiltonian (including a Lagrangian integrated through its Legendre
-transform). The other of q̇ and p, and the energy, are derived on demand.
+transform). The other of q̇ and p, and the energy, are derived on demand by the
+system the state belongs to (`AbstractSystem.state_velocity`, …).
 """
 
 from __future__ import annotations
@@ -14,9 +15,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .mechanics.hamiltonian import AbstractHamiltonian
-from .mechanics.lagrangian import Lagrangian
-from .rigid.body import RigidBody
+from .system import AbstractSystem
 
 
 class Trajectory(eqx.Module):
@@ -31,7 +30,7 @@ class Trajectory(eqx.Module):
 
     ts: jax.Array
     ys: tuple[Any, Any]
-    system: Lagrangian | AbstractHamiltonian | RigidBody
+    system: AbstractSystem
     args: Any
     run_stats: dict[str, Any]
     result: diffrax.RESULTS
@@ -44,7 +43,7 @@ class Trajectory(eqx.Module):
     @property
     def is_hamiltonian(self) -> bool:
         """True when the second state component is a momentum (not q̇)."""
-        return not isinstance(self.system, Lagrangian)
+        return self.system.second_is_momentum
 
     @property
     def q(self) -> Any:
@@ -67,18 +66,12 @@ class Trajectory(eqx.Module):
 
     @property
     def qdot(self) -> Any:
-        if isinstance(self.system, Lagrangian):
-            return self.ys[1]
-        return self._along(self.system.velocity)
+        return self._along(self.system.state_velocity)
 
     @property
     def p(self) -> Any:
-        if isinstance(self.system, Lagrangian):
-            return self._along(self.system.momentum)
-        return self.ys[1]
+        return self._along(self.system.state_momentum)
 
     def energy(self) -> jax.Array:
         """H(q, p, t) or the Jacobi integral h(q, q̇, t) at every saved time."""
-        if isinstance(self.system, Lagrangian):
-            return self._along(self.system.energy)
-        return self._along(self.system)
+        return self._along(self.system.state_energy)

@@ -8,7 +8,8 @@ import pytest
 
 import lagjax as lj
 from lagjax.mechanics.constraints import Constraints
-from lagjax.solvers.rattle import Rattle, RattleTerm
+from lagjax.solvers.rattle import Rattle
+from lagjax.terms import RattleTerm
 from tests.helpers import relative_close
 
 GRAVITY = 9.81

@@ -16,17 +16,17 @@ import pytest
 
 from lagjax.rigid import (
     RigidBody,
-    RigidBodyTerm,
     axis_angle_quaternion,
     quaternion_to_matrix,
 )
+from lagjax.terms import RigidBodyTerm
 from lagjax.rigid.free_body import (
     free_body_period,
     invariable_plane_distance,
     space_precession_rate,
     symmetric_precession_rate,
 )
-from lagjax.solvers.rigid import (
+from lagjax.solvers.lie_poisson import (
     QuaternionProjection,
     RigidBodyVerlet,
     RigidBodyYoshida4,

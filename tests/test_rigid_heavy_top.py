@@ -15,18 +15,18 @@ import pytest
 
 import lagjax as lj
 from lagjax.rigid import (
-    RigidBodyTerm,
     euler_zxz_body_angular_velocity,
     euler_zxz_to_rotation,
     quaternion_to_matrix,
 )
+from lagjax.terms import RigidBodyTerm
 from lagjax.rigid.heavy_top import (
     gyroscopic_precession_rates,
     steady_precession_rates,
     turning_point_cubic,
 )
 from lagjax.scenes.rigid import HeavySymmetricTop
-from lagjax.solvers.rigid import QuaternionProjection, RigidBodyYoshida4
+from lagjax.solvers.lie_poisson import QuaternionProjection, RigidBodyYoshida4
 
 SAMPLES = 3001
 TOLERANCE = dict(rtol=1e-12, atol=1e-12)

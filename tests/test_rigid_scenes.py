@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 import lagjax as lj
-from lagjax.rigid import RigidBodyTerm, euler_zxz_to_rotation, quaternion_to_matrix
+from lagjax.rigid import euler_zxz_to_rotation, quaternion_to_matrix
+from lagjax.terms import RigidBodyTerm
 from lagjax.scenes.rigid import (
     DAY,
     SCENES,
@@ -17,7 +18,7 @@ from lagjax.scenes.rigid import (
     HeavySymmetricTop,
     TorqueFreeBody,
 )
-from lagjax.solvers.rigid import QuaternionProjection, RigidBodyYoshida4
+from lagjax.solvers.lie_poisson import QuaternionProjection, RigidBodyYoshida4
 from tests.helpers import relative_close
 
 SAMPLES = 1201

@@ -20,14 +20,14 @@ from lagjax.fixed_step import integrate_fixed_steps
 from lagjax.precision import cast_floats
 from lagjax.rigid import (
     RigidBody,
-    RigidBodyTerm,
     axis_angle_quaternion,
     quaternion_multiply,
     quaternion_to_matrix,
 )
+from lagjax.terms import RigidBodyTerm
 from lagjax.rigid.free_body import space_precession_rate, symmetric_precession_rate
 from lagjax.scenes.rigid import EarthFreePrecession
-from lagjax.solvers.rigid import (
+from lagjax.solvers.lie_poisson import (
     QuaternionProjection,
     RigidBodyVerlet,
     RigidBodyYoshida4,

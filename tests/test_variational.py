@@ -6,7 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import lagjax as lj
-from lagjax.solvers.variational import LagrangianTerm
+from lagjax.terms import LagrangianTerm
 
 
 def double_pendulum(q, qd):

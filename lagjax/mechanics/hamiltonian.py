@@ -26,6 +26,7 @@ from typing import Any
 import equinox as eqx
 import jax
 
+from ..system import AbstractSystem, is_partitioned
 from .lagrangian import Lagrangian
 from .legendre import invert_gradient, tree_dot
 from .signature import (
@@ -36,10 +37,69 @@ from .signature import (
 )
 
 
-class AbstractHamiltonian(eqx.Module):
+class AbstractHamiltonian(AbstractSystem):
     """A Hamiltonian system. Call it as `H(q, p, t=0.0, args=None)` for the value."""
 
     quadratic_in_momentum: eqx.AbstractVar[bool]
+
+    # -- AbstractSystem: the state is (q, p) for every solver ----------------------
+    # Imports are local: the solvers and terms are built on this module.
+
+    @property
+    def second_is_momentum(self) -> bool:
+        return True
+
+    def default_solver(self, dt: Any) -> Any:
+        """`GaussLegendre(stages=2)` with `dt` (`Yoshida4` when separable), else
+        adaptive `Tsit5`."""
+        import diffrax
+
+        from ..solvers.implicit import GaussLegendre
+
+        return diffrax.Tsit5() if dt is None else GaussLegendre(stages=2)
+
+    def integration(self, solver: Any, y0: Any, t0: Any, args: Any) -> Any:
+        """Hamilton's equations as one `ODETerm`, or the (drift, kick) pair of a
+        splitting method for a separable H."""
+        import diffrax
+
+        from ..terms import (
+            HamiltonVectorField,
+            LagrangianTerm,
+            SeparableDrift,
+            SeparableKick,
+        )
+
+        if solver.term_structure is LagrangianTerm:
+            raise ValueError(
+                f"{type(solver).__name__} discretizes a Lagrangian; got "
+                f"{type(self).__name__}. Use .to_lagrangian() or another solver."
+            )
+        if not is_partitioned(solver):
+            return diffrax.ODETerm(HamiltonVectorField(self)), y0, self
+        if not isinstance(self, SeparableHamiltonian):
+            raise ValueError(
+                f"{type(solver).__name__} is a splitting method and needs a "
+                "SeparableHamiltonian(T, V); for a general H use GaussLegendre, "
+                "ImplicitMidpoint or an adaptive diffrax solver."
+            )
+        terms = (
+            diffrax.ODETerm(SeparableDrift(self)),
+            diffrax.ODETerm(SeparableKick(self)),
+        )
+        return terms, y0, self
+
+    def state_velocity(self, q: Any, second: Any, t: Any, args: Any) -> Any:
+        return self.velocity(q, second, t, args)
+
+    def state_momentum(self, q: Any, second: Any, t: Any, args: Any) -> Any:
+        return second
+
+    def state_energy(self, q: Any, second: Any, t: Any, args: Any) -> jax.Array:
+        return self(q, second, t, args)
+
+    def path_lagrangian(self) -> Lagrangian:
+        return self.to_lagrangian()
 
     @abc.abstractmethod
     def __call__(self, q: Any, p: Any, t: Any = 0.0, args: Any = None) -> jax.Array:
@@ -109,6 +169,14 @@ class SeparableHamiltonian(AbstractHamiltonian):
             V, minimum=1, maximum=3, what="the potential energy V"
         )
         self.quadratic_in_momentum = quadratic_in_momentum
+
+    def default_solver(self, dt: Any) -> Any:
+        """`Yoshida4` with `dt` (explicit, symplectic, order 4), else `Tsit5`."""
+        import diffrax
+
+        from ..solvers.splitting import Yoshida4
+
+        return diffrax.Tsit5() if dt is None else Yoshida4()
 
     def kinetic_energy(self, p: Any, t: Any = 0.0, args: Any = None) -> jax.Array:
         value = call_with_arity(self.kinetic, self.kinetic_arity, p, t, args)

@@ -23,6 +23,7 @@ import jax
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
+from ..system import AbstractSystem, is_partitioned
 from .constraints import Constraints, constrained_motion
 from .euler_lagrange import euler_lagrange_acceleration
 from .legendre import tree_dot
@@ -37,7 +38,7 @@ if TYPE_CHECKING:
     from .hamiltonian import LegendreHamiltonian
 
 
-class Lagrangian(eqx.Module):
+class Lagrangian(AbstractSystem):
     r"""A mechanical system given by its Lagrangian $L(q, \dot q, t)$.
 
     **Arguments:**
@@ -204,3 +205,102 @@ class Lagrangian(eqx.Module):
         from .hamiltonian import LegendreHamiltonian
 
         return LegendreHamiltonian(self)
+
+    # -- AbstractSystem: how the loop integrates a Lagrangian ---------------------
+    # Imports are local: the solvers and terms are built on this module.
+
+    @property
+    def second_is_momentum(self) -> bool:
+        return False
+
+    def default_solver(self, dt: Any) -> Any:
+        """`GaussLegendre(stages=2)` with `dt` (implicit, symplectic, order 4), else
+        adaptive `Tsit5`; with constraints, `Tsit5` projected onto them."""
+        import diffrax
+
+        from ..solvers.implicit import GaussLegendre
+        from ..solvers.projection import ConstraintProjection
+
+        if self.constraints is not None:
+            return ConstraintProjection(diffrax.Tsit5())
+        return diffrax.Tsit5() if dt is None else GaussLegendre(stages=2)
+
+    def adapt_solver(self, solver: Any) -> Any:
+        """With constraints: plain diffrax solvers get the projection; solvers that
+        would ignore the constraints are refused."""
+        if self.constraints is None:
+            return solver
+        from ..solvers.implicit import AbstractGaussLegendre
+        from ..solvers.projection import ConstraintProjection
+        from ..solvers.rattle import Rattle
+        from ..terms import LagrangianTerm
+
+        if isinstance(solver, (ConstraintProjection, Rattle)):
+            return solver
+        structure_preserving = (
+            is_partitioned(solver)
+            or isinstance(solver, AbstractGaussLegendre)
+            or solver.term_structure is LagrangianTerm
+        )
+        if structure_preserving or not isinstance(solver.term_structure, type):
+            raise ValueError(
+                f"{type(solver).__name__} does not enforce constraints. Integrate a "
+                "constrained Lagrangian with an (explicit or implicit) diffrax solver, "
+                "which simulate projects onto the constraints after each step, or with "
+                "Rattle (holonomic constraints, constant mass matrix)."
+            )
+        return ConstraintProjection(solver)
+
+    def integration(self, solver: Any, y0: Any, t0: Any, args: Any) -> Any:
+        """(q, q̇) with the Euler–Lagrange vector field for general solvers; (q, p)
+        of the Legendre transform for symplectic ones (and L itself for variational
+        ones, the constraints for RATTLE)."""
+        import diffrax
+
+        from ..solvers.implicit import AbstractGaussLegendre
+        from ..terms import (
+            ConstrainedLagrangianTerm,
+            LagrangianTerm,
+            LagrangianVectorField,
+            RattleTerm,
+        )
+
+        def canonical_start():
+            q0, qdot0 = y0
+            return (q0, self.momentum(q0, qdot0, t0, args))
+
+        if self.constraints is not None:
+            if solver.term_structure is RattleTerm:
+                return RattleTerm(self), canonical_start(), self.to_hamiltonian()
+            return ConstrainedLagrangianTerm(self), y0, self
+        if solver.term_structure is LagrangianTerm:
+            if self.force is not None or self.dissipation is not None:
+                raise ValueError(
+                    f"{type(solver).__name__} discretizes the conservative action only; "
+                    "this Lagrangian has a force or dissipation. Use GaussLegendre or "
+                    "an adaptive solver."
+                )
+            return LagrangianTerm(self), canonical_start(), self.to_hamiltonian()
+        if isinstance(solver, AbstractGaussLegendre):
+            hamiltonian = self.to_hamiltonian()
+            terms, _, _ = hamiltonian.integration(solver, None, t0, args)
+            return terms, canonical_start(), hamiltonian
+        if is_partitioned(solver):
+            raise ValueError(
+                f"{type(solver).__name__} is a splitting method for separable "
+                "Hamiltonians H = T(p) + V(q); integrate a Lagrangian with an implicit "
+                "symplectic method (GaussLegendre, ImplicitMidpoint) or an adaptive one."
+            )
+        return diffrax.ODETerm(LagrangianVectorField(self)), y0, self
+
+    def state_velocity(self, q: Any, second: Any, t: Any, args: Any) -> Any:
+        return second
+
+    def state_momentum(self, q: Any, second: Any, t: Any, args: Any) -> Any:
+        return self.momentum(q, second, t, args)
+
+    def state_energy(self, q: Any, second: Any, t: Any, args: Any) -> jax.Array:
+        return self.energy(q, second, t, args)
+
+    def path_lagrangian(self) -> Lagrangian:
+        return self

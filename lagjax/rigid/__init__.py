@@ -2,8 +2,8 @@
 
 - `inertia`, `solids`: inertia tensors, the axis theorems, principal axes.
 - `euler_angles`, `quaternion`: orientations and angular velocities.
-- `body`, `term`: `RigidBody` (Euler's equations on quaternions) and its diffrax term;
-  the structure-preserving solvers are in `lagjax.solvers.rigid`.
+- `body`: `RigidBody` (Euler's equations on quaternions; its diffrax term is `lagjax.terms.RigidBodyTerm`);
+  the structure-preserving solvers are in `lagjax.solvers.lie_poisson`.
 - `free_body`, `heavy_top`: closed forms (precession, periods, nutation bounds).
 """
 
@@ -52,4 +52,3 @@ from .solids import solid_sphere_inertia as solid_sphere_inertia
 from .solids import spherical_shell_inertia as spherical_shell_inertia
 from .solids import thin_disc_inertia as thin_disc_inertia
 from .solids import thin_rod_inertia as thin_rod_inertia
-from .term import RigidBodyTerm as RigidBodyTerm

@@ -23,7 +23,7 @@ The energy $H = \tfrac12\boldsymbol\Pi^T\mathbf I^{-1}\boldsymbol\Pi + V(R)$ and
 without torque, the space angular momentum $\mathbf L = R\boldsymbol\Pi$ are
 conserved; $|\boldsymbol\Pi| = |\mathbf L|$ is conserved by any torque-free motion.
 This is a Lie–Poisson system, not a canonical one, which is why it has its own
-structure-preserving solvers (`lagjax.solvers.rigid`).
+structure-preserving solvers (`lagjax.solvers.lie_poisson`).
 
 References: the course text §4.7–4.8; Goldstein, Poole & Safko, *Classical
 Mechanics*, 3rd ed., §5.5–5.7; Marsden & Ratiu, *Introduction to Mechanics and
@@ -40,11 +40,12 @@ import jax
 import jax.numpy as jnp
 
 from lagjax.mechanics.signature import call_with_arity, check_scalar, positional_arity
+from lagjax.system import AbstractSystem
 
 from .quaternion import quaternion_rate, quaternion_to_matrix, skew
 
 
-class RigidBody(eqx.Module):
+class RigidBody(AbstractSystem):
     r"""A rigid body in principal axes, with an optional potential $V(R)$.
 
     **Arguments:**
@@ -185,3 +186,37 @@ class RigidBody(eqx.Module):
         angular velocity; `q` is normalised."""
         quaternion = jnp.asarray(quaternion, dtype=self.moments.dtype)
         return quaternion / jnp.linalg.norm(quaternion), self.moments * omega_body
+
+    # -- AbstractSystem: the state is (quaternion, body momentum) ------------------
+    # Imports are local: the solvers and terms are built on this module.
+
+    @property
+    def second_is_momentum(self) -> bool:
+        return True
+
+    def default_solver(self, dt: Any) -> Any:
+        """`RigidBodyYoshida4` (Lie–Poisson splitting) with `dt`, else adaptive
+        `Tsit5` with the quaternion projected back to unit length."""
+        import diffrax
+
+        from lagjax.solvers.lie_poisson import QuaternionProjection, RigidBodyYoshida4
+
+        if dt is None:
+            return QuaternionProjection(diffrax.Tsit5())
+        return RigidBodyYoshida4()
+
+    def integration(self, solver: Any, y0: Any, t0: Any, args: Any) -> Any:
+        """The `RigidBodyTerm`: any solver integrates it, Lie–Poisson ones read the
+        body from it."""
+        from lagjax.terms import RigidBodyTerm
+
+        return RigidBodyTerm(self), y0, self
+
+    def state_velocity(self, q: Any, second: Any, t: Any, args: Any) -> Any:
+        return self.velocity(q, second, t, args)
+
+    def state_momentum(self, q: Any, second: Any, t: Any, args: Any) -> Any:
+        return second
+
+    def state_energy(self, q: Any, second: Any, t: Any, args: Any) -> jax.Array:
+        return self(q, second, t, args)

@@ -28,6 +28,7 @@ import jax.numpy as jnp
 
 from lagjax.mechanics.hamiltonian import AbstractHamiltonian
 from lagjax.mechanics.lagrangian import Lagrangian
+from lagjax.system import AbstractSystem
 
 
 def parameter(default: float | Any) -> Any:
@@ -39,7 +40,7 @@ def parameter(default: float | Any) -> Any:
     return eqx.field(default=default, converter=lambda x: jnp.asarray(x, dtype=float))
 
 
-class AbstractScene(eqx.Module):
+class AbstractScene(AbstractSystem):
     """Base of all scenes. Subclasses are final equinox Modules.
 
     Class attributes: `default_t1` (s) and `default_dt` (s, for fixed-step solvers;
@@ -57,6 +58,41 @@ class AbstractScene(eqx.Module):
     @abc.abstractmethod
     def initial_state(self) -> tuple[Any, Any]:
         """A representative start: (q0, q̇0) for a Lagrangian, (q0, p0) otherwise."""
+
+    # -- AbstractSystem: a scene is its system with itself as `args` -------------
+    # `simulate` and the action resolve a scene first; the other methods delegate
+    # for code that holds a scene directly.
+
+    def resolve(self, args: Any) -> tuple[AbstractSystem, Any]:
+        """`(self.system(), self)`, or the caller's `args` when given (a batch of
+        scenes, or a scene of other parameters)."""
+        return self.system(), self if args is None else args
+
+    def default_solver(self, dt: Any) -> Any:
+        return self.system().default_solver(dt)
+
+    def adapt_solver(self, solver: Any) -> Any:
+        return self.system().adapt_solver(solver)
+
+    def integration(self, solver: Any, y0: Any, t0: Any, args: Any) -> Any:
+        args = self if args is None else args
+        return self.system().integration(solver, y0, t0, args)
+
+    @property
+    def second_is_momentum(self) -> bool:
+        return self.system().second_is_momentum
+
+    def state_velocity(self, q: Any, second: Any, t: Any, args: Any) -> Any:
+        return self.system().state_velocity(q, second, t, args)
+
+    def state_momentum(self, q: Any, second: Any, t: Any, args: Any) -> Any:
+        return self.system().state_momentum(q, second, t, args)
+
+    def state_energy(self, q: Any, second: Any, t: Any, args: Any) -> Any:
+        return self.system().state_energy(q, second, t, args)
+
+    def path_lagrangian(self) -> Lagrangian:
+        return self.system().path_lagrangian()
 
     def checks(self, trajectory: Any) -> dict[str, tuple[jax.Array, jax.Array]]:
         """{name: (measured, expected)} from a trajectory of this scene.

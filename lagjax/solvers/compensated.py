@@ -34,6 +34,14 @@ def compensated_add(y: Any, increment: Any, compensation: Any) -> tuple[Any, Any
     return total, new_compensation
 
 
+def add_to_state(y: Any, increment: Any, compensation: Any) -> tuple[Any, Any]:
+    """`(y + increment, compensation)`: Kahan-compensated unless `compensation` is
+    None (a solver built with `compensated=False`)."""
+    if compensation is None:
+        return jax.tree_util.tree_map(jnp.add, y, increment), None
+    return compensated_add(y, increment, compensation)
+
+
 def zero_compensation(y: Any) -> Any:
     """The compensation to start a run with: zeros shaped like `y`."""
     return jax.tree_util.tree_map(jnp.zeros_like, y)

@@ -17,6 +17,13 @@ Both changes are of the size of the local error, so the solver's order, its erro
 estimate and a first-same-as-last derivative stay valid to that order, and $g$ and
 $c$ stay at round-off for the whole run.
 
+`AbstractProjectedSolver` is the general wrapper — any diffrax solver, with a
+projection after every step — that `ConstraintProjection` (here) and the rigid
+body's `QuaternionProjection` (`lagjax.solvers.lie_poisson`) specialise. It
+delegates everything to the wrapped solver (so `isinstance` checks for adaptivity
+are the wrapped solver's) and only replaces `y1`, in the state and the dense
+output, by its projection.
+
 References: Hairer, Lubich & Wanner, *Geometric Numerical Integration*, 2nd ed.,
 Springer (2006), §IV.4 (projection methods) and §VII.1; Ascher & Petzold,
 *Computer Methods for ODEs and DAEs* (1998), §10.3 (stabilization by projection).
@@ -24,9 +31,11 @@ Springer (2006), §IV.4 (projection methods) and §VII.1; Ascher & Petzold,
 
 from __future__ import annotations
 
+import abc
 from typing import Any
 
 import diffrax
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import optimistix as optx
@@ -36,45 +45,52 @@ from lagjax.mechanics.constraints import least_correction, raise_if_rank_deficie
 from lagjax.mechanics.lagrangian import Lagrangian
 from lagjax.mechanics.linalg import solve_dense
 from lagjax.precision import match_dtypes, newton_for
-from lagjax.solvers.projected import AbstractProjectedSolver
+from lagjax.terms import ConstrainedLagrangianTerm, unwrap_term
 
 
-class ConstrainedLagrangianTerm(diffrax.AbstractTerm):
-    """The term of a constrained `Lagrangian` on `y = (q, q̇)`.
+class AbstractProjectedSolver(diffrax.AbstractWrappedSolver):
+    """Delegates to `solver` and projects each step's end state with `project`."""
 
-    `vf` is `(q̇, q̈)` with q̈ including the constraint forces, so any diffrax solver
-    integrates it; `ConstraintProjection` reads the constraints from it.
-    """
+    solver: eqx.AbstractVar[diffrax.AbstractSolver]
 
-    lagrangian: Lagrangian
+    @property
+    def term_structure(self):  # pyright: ignore[reportIncompatibleVariableOverride]
+        return self.solver.term_structure
 
-    def vf(self, t, y, args):
-        q, qdot = y
-        qddot = self.lagrangian.acceleration(q, qdot, t, args, check=False)
-        return qdot, match_dtypes(qddot, qdot)
+    @property
+    def interpolation_cls(self):  # pyright: ignore[reportIncompatibleVariableOverride]
+        return self.solver.interpolation_cls
 
-    def contr(self, t0, t1, **kwargs):
-        del kwargs
-        return t1 - t0
+    def order(self, terms: Any) -> int | None:
+        return self.solver.order(terms)
 
-    def prod(self, vf, control):
-        return jax.tree_util.tree_map(lambda v: v * control, vf)
+    def error_order(self, terms: Any):
+        return self.solver.error_order(terms)
 
+    def init(self, terms, t0, t1, y0, args):
+        return self.solver.init(terms, t0, t1, y0, args)
 
-def unwrap_constrained_term(terms: Any, kind: type) -> tuple[Any, Any]:
-    """The term of type `kind` inside diffrax's time-direction wrappers, and the
-    direction (diffrax integrates t1 < t0 as forward time in −t)."""
-    direction = 1
-    # diffrax's WrapTerm is not public API; it holds `term` and `direction`.
-    while not isinstance(terms, kind):
-        inner = getattr(terms, "term", None)
-        if inner is None:
-            raise ValueError(
-                f"this solver needs a {kind.__name__}, got {type(terms).__name__}"
-            )
-        direction = direction * terms.direction
-        terms = inner
-    return terms, direction
+    @abc.abstractmethod
+    def project(
+        self, terms: Any, t1: Any, y1: Any, args: Any
+    ) -> tuple[Any, diffrax.RESULTS]:
+        """The projected end state, and whether the projection succeeded."""
+
+    def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
+        y1, error, dense_info, solver_state, result = self.solver.step(
+            terms, t0, t1, y0, args, solver_state, made_jump
+        )
+        y1, projection_result = self.project(terms, t1, y1, args)
+        y1 = match_dtypes(y1, y0)  # a float64 constant in g must not widen the state
+        result = diffrax.RESULTS.where(
+            result == diffrax.RESULTS.successful, projection_result, result
+        )
+        if "y1" in dense_info:
+            dense_info = {**dense_info, "y1": y1}
+        return y1, error, dense_info, solver_state, result
+
+    def func(self, terms, t0, y0, args):
+        return self.solver.func(terms, t0, y0, args)
 
 
 def _project_positions(lagrangian, q, qdot, t, args, newton, max_steps):
@@ -166,7 +182,7 @@ class ConstraintProjection(AbstractProjectedSolver):
     atol: float = 1e-14
 
     def project(self, terms, t1, y1, args):
-        term, direction = unwrap_constrained_term(terms, ConstrainedLagrangianTerm)
+        term, direction = unwrap_term(terms, ConstrainedLagrangianTerm)
         q1, qdot1 = y1
         return project_onto_constraints(
             term.lagrangian,

@@ -48,32 +48,8 @@ from lagjax.mechanics.linalg import (
     solve_unrolled,
 )
 from lagjax.precision import newton_for
-from lagjax.solvers.compensated import compensated_add, zero_compensation
-from lagjax.solvers.projection import unwrap_constrained_term
-
-
-class RattleTerm(diffrax.AbstractTerm):
-    """The term of a holonomically constrained `Lagrangian` on `y = (q, p)`.
-
-    `vf` is $(\\dot q, \\dot p) = (M^{-1}p, \\partial L/\\partial q + G^T\\lambda)$, so
-    diffrax utilities that evaluate a term work; `Rattle` reads L and g from it.
-    """
-
-    lagrangian: Lagrangian
-
-    def vf(self, t, y, args):
-        q, p = y
-        qdot = self.lagrangian.to_hamiltonian().velocity(q, p, t, args)
-        gradient = jax.grad(self.lagrangian, argnums=0)(q, qdot, t, args)
-        force = self.lagrangian.constraint_force(q, qdot, t, args)
-        return qdot, jax.tree_util.tree_map(jnp.add, gradient, force)
-
-    def contr(self, t0, t1, **kwargs):
-        del kwargs
-        return t1 - t0
-
-    def prod(self, vf, control):
-        return jax.tree_util.tree_map(lambda v: v * control, vf)
+from lagjax.solvers.compensated import add_to_state, zero_compensation
+from lagjax.terms import RattleTerm, physical_step, unwrap_term
 
 
 def _holonomic_constraints(lagrangian: Lagrangian) -> Constraints:
@@ -158,7 +134,7 @@ class Rattle(diffrax.AbstractSolver[_RattleState]):
         return 2
 
     def init(self, terms, t0, t1, y0, args) -> _RattleState:
-        term, direction = unwrap_constrained_term(terms, RattleTerm)
+        term, direction = unwrap_term(terms, RattleTerm)
         lagrangian = term.lagrangian
         constraints = _holonomic_constraints(lagrangian)
         del t1
@@ -178,28 +154,21 @@ class Rattle(diffrax.AbstractSolver[_RattleState]):
 
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
         del made_jump
-        term, direction = unwrap_constrained_term(terms, RattleTerm)
+        term, t0, h = physical_step(terms, RattleTerm, t0, t1)
         lagrangian = term.lagrangian
         inverse_mass, guess, compensation = solver_state
-        # Physical start time and (signed) step.
-        t0, h = direction * t0, direction * (t1 - t0)
         t1 = t0 + h
         q0, p0 = y0
         increment_q, half_kick, newton = self._shake(
             lagrangian, inverse_mass, guess, q0, p0, t0, t1, h, args
         )
-        if compensation is None:
-            q1 = jax.tree_util.tree_map(jnp.add, q0, increment_q)
-            compensation_q = None
-        else:
-            q1, compensation_q = compensated_add(q0, increment_q, compensation[0])
+        compensation_q, compensation_p = compensation or (None, None)
+        q1, compensation_q = add_to_state(q0, increment_q, compensation_q)
         increment_p = self._rattle_kick(
             lagrangian, inverse_mass, q1, p0, half_kick, t1, h, args
         )
-        if compensation is None:
-            p1 = jax.tree_util.tree_map(jnp.add, p0, increment_p)
-        else:
-            p1, compensation_p = compensated_add(p0, increment_p, compensation[1])
+        p1, compensation_p = add_to_state(p0, increment_p, compensation_p)
+        if compensation is not None:
             compensation = (compensation_q, compensation_p)
         y1 = (q1, p1)
         result = diffrax.RESULTS.promote(newton.result)

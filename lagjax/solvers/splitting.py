@@ -47,7 +47,7 @@ from diffrax import (
     LocalLinearInterpolation,
 )
 
-from lagjax.solvers.compensated import compensated_add, zero_compensation
+from lagjax.solvers.compensated import add_to_state, zero_compensation
 
 if TYPE_CHECKING:
     from typing import ClassVar as AbstractClassVar
@@ -144,13 +144,6 @@ def _add(x: Any, y: Any) -> Any:
     return jax.tree_util.tree_map(lambda a, b: a + b, x, y)
 
 
-def _add_to_state(y: Any, increment: Any, compensation: Any) -> tuple[Any, Any]:
-    """`y + increment`, Kahan-compensated unless `compensation` is None."""
-    if compensation is None:
-        return _add(y, increment), None
-    return compensated_add(y, increment, compensation)
-
-
 class AbstractSplittingSolver(AbstractSolver[_SplittingState]):
     r"""A kick–drift–…–kick splitting method for $H = T(p) + V(q)$.
 
@@ -212,13 +205,13 @@ class AbstractSplittingSolver(AbstractSolver[_SplittingState]):
         # The increments stay small, so they keep their low-order bits; they meet
         # the (large) state once per step, through the compensated sum.
         compensation_q, compensation_p = compensation or (None, None)
-        q1, compensation_q = _add_to_state(q0, delta_q, compensation_q)
+        q1, compensation_q = add_to_state(q0, delta_q, compensation_q)
         # The last kick is evaluated at the stored new position, so it doubles as
         # the first kick of the next step (first-same-as-last).
         force = term_p.vf(t1, q1, args)
         last_kick = _scaled(term_p.contr(t0, t1), self.kick_coefficients[-1])
         delta_p = _add(delta_p, term_p.prod(force, last_kick))
-        p1, compensation_p = _add_to_state(p0, delta_p, compensation_p)
+        p1, compensation_p = add_to_state(p0, delta_p, compensation_p)
 
         if compensation is not None:
             compensation = (compensation_q, compensation_p)

@@ -36,42 +36,7 @@ from jax.flatten_util import ravel_pytree
 from lagjax.mechanics.lagrangian import Lagrangian
 from lagjax.precision import newton_for
 from lagjax.solvers.compensated import compensated_add, zero_compensation
-
-
-class LagrangianTerm(diffrax.AbstractTerm):
-    """A diffrax term that carries a `Lagrangian` itself, for variational solvers.
-
-    The state is `(q, p)`. `vf` gives Hamilton's equations of the Legendre-transformed
-    system, so diffrax utilities that evaluate a term still work; variational solvers
-    use `lagrangian` directly.
-    """
-
-    lagrangian: Lagrangian
-
-    def vf(self, t, y, args):
-        q, p = y
-        return self.lagrangian.to_hamiltonian().vector_field(q, p, t, args)
-
-    def contr(self, t0, t1, **kwargs):
-        del kwargs
-        return t1 - t0
-
-    def prod(self, vf, control):
-        return jax.tree_util.tree_map(lambda v: v * control, vf)
-
-
-def _unwrap(terms: Any) -> tuple[LagrangianTerm, Any]:
-    """The `LagrangianTerm` inside diffrax's time-direction wrapper, and the direction.
-
-    diffrax integrates t1 < t0 as forward time in −t, wrapping the term; the discrete
-    Lagrangian needs the physical time and step, so the wrapper is undone here.
-    """
-    direction = 1
-    # diffrax's WrapTerm is not public API; it holds `term` and `direction`.
-    while not isinstance(terms, LagrangianTerm):
-        direction = direction * terms.direction
-        terms = terms.term
-    return terms, direction
+from lagjax.terms import LagrangianTerm, physical_step
 
 
 def discrete_lagrangian(
@@ -119,11 +84,9 @@ class VariationalMidpoint(diffrax.AbstractSolver):
 
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
         del made_jump
-        term, direction = _unwrap(terms)
+        term, t0, h = physical_step(terms, LagrangianTerm, t0, t1)
         lagrangian = term.lagrangian
         q0, p0 = y0
-        # Physical start time and (signed) step.
-        t0, h = direction * t0, direction * (t1 - t0)
         _, unravel = ravel_pytree(q0)
         p0_flat, _ = ravel_pytree(p0)
         scale = 1.0 + jnp.max(jnp.abs(p0_flat))

@@ -71,13 +71,13 @@ import jax.numpy as jnp
 from diffrax import RESULTS, LocalLinearInterpolation
 
 from lagjax.rigid.quaternion import quaternion_multiply
-from lagjax.rigid.term import RigidBodyTerm, unwrap_rigid_body_term
-from lagjax.solvers.compensated import compensated_add, zero_compensation
-from lagjax.solvers.projected import AbstractProjectedSolver
+from lagjax.solvers.compensated import add_to_state, zero_compensation
+from lagjax.solvers.projection import AbstractProjectedSolver
 
 # The composition tables and the kick merging are those of the canonical splitting
 # methods: one source for Yoshida's triple jump.
 from lagjax.solvers.splitting import _YOSHIDA4_WEIGHTS, _merged_kicks
+from lagjax.terms import RigidBodyTerm, physical_step
 
 if TYPE_CHECKING:
     from typing import ClassVar as AbstractClassVar
@@ -190,12 +190,6 @@ def _stage_table(weights, dtype):
     return jnp.asarray([weights, kicks[:-1], clocks], dtype=dtype).T, kicks[-1]
 
 
-def _add_to_state(y, increment, compensation):
-    if compensation is None:
-        return y + increment, None
-    return compensated_add(y, increment, compensation)
-
-
 class AbstractRigidBodySplitting(diffrax.AbstractSolver[_RigidState]):
     r"""Kick–drift–kick Lie–Poisson splitting, composed with weights $\gamma_s$.
 
@@ -235,16 +229,14 @@ class AbstractRigidBodySplitting(diffrax.AbstractSolver[_RigidState]):
 
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
         del made_jump  # nothing is carried between steps but round-off
-        term, direction = unwrap_rigid_body_term(terms)
-        # Physical start time and step (diffrax runs t1 < t0 in reversed time).
-        start, h = direction * t0, direction * (t1 - t0)
+        term, start, h = physical_step(terms, RigidBodyTerm, t0, t1)
         q0, momentum0 = y0
         delta, change = self._increments(term.body, start, h, q0, momentum0, args)
         compensation_q, compensation_p = solver_state or (None, None)
-        q1, compensation_q = _add_to_state(
+        q1, compensation_q = add_to_state(
             q0, quaternion_multiply(q0, delta), compensation_q
         )
-        momentum1, compensation_p = _add_to_state(momentum0, change, compensation_p)
+        momentum1, compensation_p = add_to_state(momentum0, change, compensation_p)
         if solver_state is not None:
             solver_state = (compensation_q, compensation_p)
         y1 = (q1, momentum1)
