@@ -1,53 +1,111 @@
 """Scenes: the classical-mechanics canon as ready-made systems with known answers.
 
-`catalog()` maps each scene's command-line name to its class; every class docstring
-starts with a one-line description and gives its L or H and the source of its
-closed forms. See `base.AbstractScene` for the convention.
+Every scene class is importable from here (`from lagjax.scenes import
+FoucaultPendulum`); `catalog()` maps each one's command-line name to its class and
+`describe()` lists them. Every class docstring starts with a one-line description and
+gives its L or H, its parameters with their units and the source of its closed forms.
+See `base.AbstractScene` for the convention and `base.parameter` for how parameters
+are declared and checked.
 """
 
-from __future__ import annotations
-
-import re
-
 from .base import AbstractScene as AbstractScene
+from .base import Interval as Interval
+from .base import parameter as parameter
+from .central import KeplerCartesian as KeplerCartesian
+from .central import KeplerPolar as KeplerPolar
+from .chains import FermiPastaUlamChain as FermiPastaUlamChain
+from .chains import LinearTriatomicMolecule as LinearTriatomicMolecule
+from .chains import SpringChain as SpringChain
+from .constrained import CartesianAtwoodMachine as CartesianAtwoodMachine
+from .constrained import CartesianPendulum as CartesianPendulum
+from .constrained import CartesianRotatingWireBead as CartesianRotatingWireBead
+from .constrained import RollingDisk as RollingDisk
+from .earth import EastwardDeflection as EastwardDeflection
+from .earth import FoucaultPendulum as FoucaultPendulum
+from .earth import PlumbLine as PlumbLine
+from .fields import AtwoodMachine as AtwoodMachine
+from .fields import ChargeInUniformFields as ChargeInUniformFields
+from .fields import FreeFall as FreeFall
+from .oscillators import CoupledOscillators as CoupledOscillators
+from .oscillators import DampedDrivenOscillator as DampedDrivenOscillator
+from .oscillators import HarmonicOscillator as HarmonicOscillator
+from .pendulums import DoublePendulum as DoublePendulum
+from .pendulums import SimplePendulum as SimplePendulum
+from .rigid import EarthFreePrecession as EarthFreePrecession
+from .rigid import HeavySymmetricTop as HeavySymmetricTop
+from .rigid import TorqueFreeBody as TorqueFreeBody
+from .rotating import AcceleratedFrameParticle as AcceleratedFrameParticle
+from .rotating import BeadOnRotatingWire as BeadOnRotatingWire
+from .rotating import SpinningFrameParticle as SpinningFrameParticle
+
+# The catalogue's order (not alphabetical): from the oscillator to the rolling disk,
+# as a course goes.
+__all__ = [  # noqa: RUF022
+    "HarmonicOscillator",
+    "CoupledOscillators",
+    "DampedDrivenOscillator",
+    "SimplePendulum",
+    "DoublePendulum",
+    "LinearTriatomicMolecule",
+    "SpringChain",
+    "FermiPastaUlamChain",
+    "FoucaultPendulum",
+    "EastwardDeflection",
+    "PlumbLine",
+    "SpinningFrameParticle",
+    "AcceleratedFrameParticle",
+    "BeadOnRotatingWire",
+    "KeplerCartesian",
+    "KeplerPolar",
+    "ChargeInUniformFields",
+    "AtwoodMachine",
+    "FreeFall",
+    "TorqueFreeBody",
+    "HeavySymmetricTop",
+    "EarthFreePrecession",
+    "CartesianPendulum",
+    "CartesianAtwoodMachine",
+    "CartesianRotatingWireBead",
+    "RollingDisk",
+    "AbstractScene",
+    "Interval",
+    "parameter",
+    "catalog",
+    "command_name",
+    "describe",
+    "summary",
+]
 
 
-def _command_name(scene_class: type) -> str:
-    """`SimplePendulum` → `simple-pendulum`."""
-    return re.sub(r"(?<!^)(?=[A-Z])", "-", scene_class.__name__).lower()
+def command_name(scene_class: type) -> str:
+    """The scene's command-line name: `SimplePendulum` → `simple-pendulum`."""
+    name = scene_class.__name__
+    return "".join(
+        f"-{char.lower()}" if char.isupper() and index else char.lower()
+        for index, char in enumerate(name)
+    )
 
 
 def catalog() -> dict[str, type[AbstractScene]]:
-    """{command-line name: scene class} for every scene, in a stable order."""
-    from . import (
-        central,
-        chains,
-        constrained,
-        earth,
-        fields,
-        oscillators,
-        pendulums,
-        rigid,
-        rotating,
-    )
+    """{command-line name: scene class} for every scene exported here, in `__all__`'s
+    order (stable: the command line and the tests rely on it)."""
+    exported = (globals()[name] for name in __all__)
+    return {
+        command_name(cls): cls
+        for cls in exported
+        if isinstance(cls, type)
+        and issubclass(cls, AbstractScene)
+        and not cls.__name__.startswith("Abstract")
+    }
 
-    modules = (
-        oscillators,
-        pendulums,
-        chains,
-        earth,
-        rotating,
-        central,
-        fields,
-        rigid,
-        constrained,
-    )
-    return {_command_name(cls): cls for module in modules for cls in module.SCENES}
+
+def summary(scene_class: type) -> str:
+    """The first line of the scene's docstring: plain text, no LaTeX or Markdown."""
+    return (scene_class.__doc__ or "").strip().splitlines()[0]
 
 
 def describe() -> str:
-    """One line per scene: its name and what it is."""
-    return "\n".join(
-        f"{name:28s} {(cls.__doc__ or '').strip().splitlines()[0]}"
-        for name, cls in catalog().items()
-    )
+    """One line per scene, aligned: its command-line name and what it is."""
+    names = catalog()
+    width = max(map(len, names)) + 2
+    return "\n".join(f"{name:<{width}}{summary(cls)}" for name, cls in names.items())

@@ -1,16 +1,30 @@
 """`AbstractScene`: a worked example — a system, its parameters, a start, its answers.
 
-A scene is an equinox Module whose physical parameters are array fields. Its
-physics is a plain function `L(q, qdot, t, scene)` (or `H(q, p, t, scene)`, or
-`T(p, t, scene)` and `V(q, t, scene)`) that reads the parameters from the scene
-passed as `args`; `system()` wraps that function in the right lagjax class — a
-`SeparableHamiltonian` when the physics is separable, a `Lagrangian` with no time
-dependence when autonomous, and so on, so nothing the scene does not need is
-computed. Because the parameters travel as `args`, `jax.vmap` over a batch of
-scenes is a parameter sweep:
+A scene is an equinox Module whose physical parameters are array fields declared
+with `parameter()`. Its physics is a plain function `L(q, qdot, t, scene)` (or
+`H(q, p, t, scene)`, or `T(p, t, scene)` and `V(q, t, scene)`) that reads the
+parameters from the scene passed as `args`; `system()` wraps that function in the
+right lagjax class — a `SeparableHamiltonian` when the physics is separable, a
+`Lagrangian` with no time dependence when autonomous, and so on, so nothing the scene
+does not need is computed. Because the parameters travel as `args`, `jax.vmap` over
+a batch of scenes is a parameter sweep:
 
-    scenes = jax.vmap(lambda g: SimplePendulum(g=g))(gs)
+    scenes = jax.vmap(lambda g: SimplePendulum(gravity=g))(gs)
     finals = jax.vmap(lambda s: lj.simulate(s, s.initial_state(), t1=1.0, dt=1e-3).q)(scenes)
+
+**Validation.** Each `parameter()` states what the physics allows — `positive=True`
+for masses, lengths, moments, stiffnesses; an `Interval` for eccentricities and
+angles — and every parameter must be finite. `AbstractScene.__check_init__` checks
+*concrete* values when a scene is built and raises a `ValueError` naming the
+parameter, its value and the allowed range. Values that are JAX tracers (a scene
+built inside `jax.jit`, `jax.vmap` or `jax.grad`) are not checked: their values do
+not exist at trace time, and a run-time check (`eqx.error_if`) inside every traced
+construction would add a host callback to the compiled sweep. Validate a batch
+before vmapping over it (e.g. build one scene from its extremes).
+
+**Units.** SI unless a scene says otherwise; **angles are in radians** (latitudes,
+amplitudes, tilts): pass `math.radians(45)`, not `45`. Angle parameters with a
+bounded range reject a value in degrees with a hint.
 
 A scene holds physics and known answers only: no derivation, no integration.
 `checks(trajectory)` compares what a run measured with the scene's closed forms, for
@@ -20,36 +34,181 @@ the command line and notebooks.
 from __future__ import annotations
 
 import abc
-from typing import Any, ClassVar
+import dataclasses
+import math
+from collections.abc import Callable
+from typing import Any, ClassVar, Literal
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
+from jax.core import Tracer
 
 from lagjax.mechanics.hamiltonian import AbstractHamiltonian
 from lagjax.mechanics.lagrangian import Lagrangian
 from lagjax.system import AbstractSystem
 
+_RULE = "lagjax.scene_parameter"  # the field-metadata key of a parameter's rule
 
-def parameter(default: float | Any) -> Any:
-    """A physical parameter field: a float array (vmappable, differentiable).
+StateKind = Literal["velocity", "momentum"]
 
-    Stored with an explicit float dtype: weakly typed scalars would make scenes
-    built from Python numbers and from arrays compile separately.
+
+@dataclasses.dataclass(frozen=True)
+class Interval:
+    """The allowed values of a parameter, e.g. `Interval(0, 1, include_high=False)`
+    for an eccentricity of a bound orbit, 0 ≤ e < 1."""
+
+    low: float = -math.inf
+    high: float = math.inf
+    include_low: bool = True
+    include_high: bool = True
+
+    def contains(self, value: np.ndarray) -> bool:
+        above = value >= self.low if self.include_low else value > self.low
+        below = value <= self.high if self.include_high else value < self.high
+        return bool(np.all(above & below))
+
+    def __str__(self) -> str:
+        if self.high == math.inf:
+            return f"{'≥' if self.include_low else '>'} {self.low:g}"
+        if self.low == -math.inf:
+            return f"{'≤' if self.include_high else '<'} {self.high:g}"
+        left, right = (
+            "[" if self.include_low else "(",
+            "]" if self.include_high else ")",
+        )
+        return f"in {left}{self.low:.6g}, {self.high:.6g}{right}"
+
+
+POSITIVE = Interval(0.0, include_low=False)
+NONNEGATIVE = Interval(0.0)
+LATITUDE = Interval(-math.pi / 2, math.pi / 2)
+# A pendulum released at rest at |θ₀| < π; at the top it would stay (and its period
+# diverges), and a value in degrees is caught.
+BELOW_THE_TOP = Interval(-math.pi, math.pi, include_low=False, include_high=False)
+
+
+@dataclasses.dataclass(frozen=True)
+class _Rule:
+    """What `AbstractScene.__check_init__` checks of one parameter."""
+
+    within: Interval | None
+    angle: bool
+
+    def problem(self, value: np.ndarray) -> str | None:
+        """Why a concrete value is not allowed, or None."""
+        if not np.all(np.isfinite(value)):
+            return "must be finite"
+        if self.within is None or self.within.contains(value):
+            return None
+        hint = ""
+        if self.angle:
+            hint = " (angles are in radians: math.radians(degrees))"
+        return f"must be {self.within}{hint}"
+
+
+def _float_array(value: Any) -> jax.Array:
+    # An explicit float dtype: weakly typed scalars would make scenes built from
+    # Python numbers and from arrays compile separately.
+    return jnp.asarray(value, dtype=float)
+
+
+def parameter(
+    default: Any,
+    *,
+    positive: bool = False,
+    nonnegative: bool = False,
+    within: Interval | None = None,
+    angle: bool = False,
+    convert: Callable[[jax.Array], jax.Array] | None = None,
+) -> Any:
+    """A physical parameter field: a float array (vmappable, differentiable), checked.
+
+    **Arguments:**
+
+    - `default`: the value when the caller gives none (a number or a nested tuple).
+    - `positive`, `nonnegative`, `within`: the allowed values (> 0, ≥ 0, an
+      `Interval`); checked, with finiteness, on concrete values when the scene is
+      built (see the module docstring for traced values).
+    - `angle`: the parameter is an angle in radians (documents it; a range error
+      then says so).
+    - `convert`: a further conversion of the float array (e.g. a vector of
+      diagonal entries to a matrix).
     """
-    return eqx.field(default=default, converter=lambda x: jnp.asarray(x, dtype=float))
+    if positive + nonnegative + (within is not None) > 1:
+        raise TypeError("parameter: give at most one of positive, nonnegative, within")
+    if positive:
+        within = POSITIVE
+    elif nonnegative:
+        within = NONNEGATIVE
+
+    def converter(value: Any) -> jax.Array:
+        array = _float_array(value)
+        return array if convert is None else convert(array)
+
+    return eqx.field(
+        default=default,
+        converter=converter,
+        metadata={_RULE: _Rule(within, angle)},
+    )
+
+
+def count(default: int, *, minimum: int = 1) -> Any:
+    """A static integer field (a number of masses, of pairs): it fixes array shapes,
+    so it is part of the compiled program rather than a traced parameter."""
+
+    def converter(value: Any) -> int:
+        number = int(value)
+        if number != value or number < minimum:
+            raise ValueError(f"expected a whole number ≥ {minimum}, got {value!r}")
+        return number
+
+    return eqx.field(default=default, converter=converter, static=True)
+
+
+def _is_traced(value: Any) -> bool:
+    return isinstance(value, Tracer)
+
+
+def concrete(*values: Any) -> list[np.ndarray] | None:
+    """The values as numpy arrays for a construction-time check, or None when any is
+    a tracer (a scene built under `jit`/`vmap`/`grad` is not checked)."""
+    if any(_is_traced(value) for value in values):
+        return None
+    return [np.asarray(value) for value in values]
 
 
 class AbstractScene(AbstractSystem):
     """Base of all scenes. Subclasses are final equinox Modules.
 
-    Class attributes: `default_t1` (s) and `default_dt` (s, for fixed-step solvers;
-    the scene's own scale). Store parameters as `jnp.asarray(x, dtype=float)`: weakly
-    typed scalars would make differently built scenes compile separately.
+    Class attributes:
+
+    - `default_t1` (s) and `default_dt` (s, for fixed-step solvers; the scene's own
+      scale);
+    - `state_kind`: what `initial_state()` returns besides q — `"velocity"` for
+      (q, q̇) when `system()` is a `Lagrangian`, `"momentum"` for (q, p) when it is
+      a Hamiltonian. Tests and the command line use it to read a run's state.
+
+    Parameters are fields declared with `parameter()`, validated when concrete.
     """
 
     default_t1: ClassVar[float]
     default_dt: ClassVar[float]
+    state_kind: ClassVar[StateKind]
+
+    def __check_init__(self) -> None:
+        for field in dataclasses.fields(self):
+            rule = field.metadata.get(_RULE)
+            value = getattr(self, field.name, None)
+            if rule is None or value is None or _is_traced(value):
+                continue
+            problem = rule.problem(np.asarray(value))
+            if problem is not None:
+                raise ValueError(
+                    f"{type(self).__name__}: {field.name} = {np.asarray(value)} "
+                    f"{problem}"
+                )
 
     @abc.abstractmethod
     def system(self) -> Lagrangian | AbstractHamiltonian:

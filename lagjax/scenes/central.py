@@ -32,7 +32,7 @@ import jax.numpy as jnp
 
 from lagjax.mechanics.hamiltonian import SeparableHamiltonian
 from lagjax.mechanics.lagrangian import Lagrangian
-from lagjax.scenes.base import AbstractScene, parameter
+from lagjax.scenes.base import AbstractScene, Interval, StateKind, parameter
 
 # Newton's method on Kepler's equation started at 𝓔 = π converges monotonically for
 # mean anomalies in [0, π] (the equation is increasing and convex there); 50
@@ -57,6 +57,9 @@ def eccentric_anomaly(mean_anomaly: jax.Array, eccentricity: jax.Array) -> jax.A
     start = jnp.full_like(half_turn, jnp.pi)
     anomaly = jax.lax.fori_loop(0, _KEPLER_NEWTON_ITERATIONS, newton_step, start)
     return jnp.where(upper_half, 2 * jnp.pi - anomaly, anomaly)
+
+
+BOUND_ORBIT = Interval(0.0, 1.0, include_high=False)  # 0 ≤ e < 1: an ellipse
 
 
 class AbstractKeplerProblem(AbstractScene):
@@ -183,12 +186,12 @@ class KeplerCartesian(AbstractKeplerProblem):
     Closed forms: see the module docstring (Goldstein §3.7–3.9).
     """
 
-    eccentricity: jax.Array = parameter(0.6)
-    semi_major_axis: jax.Array = parameter(1.0)
-    gravitational_parameter: jax.Array = parameter(1.0)
-    mass: jax.Array = parameter(1.0)
+    eccentricity: jax.Array = parameter(0.6, within=BOUND_ORBIT)
+    semi_major_axis: jax.Array = parameter(1.0, positive=True)
+    gravitational_parameter: jax.Array = parameter(1.0, positive=True)
+    mass: jax.Array = parameter(1.0, positive=True)
 
-    state_kind: ClassVar[str] = "momentum"
+    state_kind: ClassVar[StateKind] = "momentum"
 
     def system(self) -> SeparableHamiltonian:
         return SeparableHamiltonian(_cartesian_kinetic, _cartesian_potential)
@@ -220,12 +223,12 @@ class KeplerPolar(AbstractKeplerProblem):
     wrapped: it grows by 2π per orbit.
     """
 
-    eccentricity: jax.Array = parameter(0.6)
-    semi_major_axis: jax.Array = parameter(1.0)
-    gravitational_parameter: jax.Array = parameter(1.0)
-    mass: jax.Array = parameter(1.0)
+    eccentricity: jax.Array = parameter(0.6, within=BOUND_ORBIT)
+    semi_major_axis: jax.Array = parameter(1.0, positive=True)
+    gravitational_parameter: jax.Array = parameter(1.0, positive=True)
+    mass: jax.Array = parameter(1.0, positive=True)
 
-    state_kind: ClassVar[str] = "velocity"
+    state_kind: ClassVar[StateKind] = "velocity"
 
     def system(self) -> Lagrangian:
         return Lagrangian(_polar_lagrangian, quadratic_in_velocity=True)

@@ -23,12 +23,11 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 
 from lagjax.mechanics.hamiltonian import SeparableHamiltonian
-from lagjax.scenes.base import AbstractScene
+from lagjax.scenes.base import AbstractScene, StateKind, count, parameter
 from lagjax.scenes.oscillators import normal_mode_motion
 
 ATOMIC_MASS_UNIT = 1.66053906660e-27  # kg, CODATA 2018
@@ -73,23 +72,13 @@ class LinearTriatomicMolecule(AbstractScene):
     the asymmetric stretch with the oxygens 1 pm out (`mode_state`).
     """
 
-    outer_mass: jax.Array
-    central_mass: jax.Array
-    spring_constant: jax.Array
+    outer_mass: jax.Array = parameter(15.9949146 * ATOMIC_MASS_UNIT, positive=True)
+    central_mass: jax.Array = parameter(12.0 * ATOMIC_MASS_UNIT, positive=True)
+    spring_constant: jax.Array = parameter(1680.0, positive=True)
 
     default_t1: ClassVar[float] = 1e-12
     default_dt: ClassVar[float] = 5e-17
-    state_kind: ClassVar[str] = "momentum"
-
-    def __init__(
-        self,
-        outer_mass=15.9949146 * ATOMIC_MASS_UNIT,
-        central_mass=12.0 * ATOMIC_MASS_UNIT,
-        spring_constant=1680.0,
-    ):
-        self.outer_mass = jnp.asarray(outer_mass)
-        self.central_mass = jnp.asarray(central_mass)
-        self.spring_constant = jnp.asarray(spring_constant)
+    state_kind: ClassVar[StateKind] = "momentum"
 
     def system(self) -> SeparableHamiltonian:
         return SeparableHamiltonian(_kinetic, _triatomic_potential)
@@ -173,18 +162,13 @@ class SpringChain(AbstractScene):
     (static, 8). Starts with the first mass 0.1 m out, at rest (all modes excited).
     """
 
-    mass: jax.Array
-    spring_constant: jax.Array
-    size: int = eqx.field(static=True)
+    mass: jax.Array = parameter(0.5, positive=True)
+    spring_constant: jax.Array = parameter(50.0, positive=True)
+    size: int = count(8)
 
     default_t1: ClassVar[float] = 10.0
     default_dt: ClassVar[float] = 0.0025
-    state_kind: ClassVar[str] = "momentum"
-
-    def __init__(self, mass=0.5, spring_constant=50.0, size=8):
-        self.mass = jnp.asarray(mass)
-        self.spring_constant = jnp.asarray(spring_constant)
-        self.size = int(size)
+    state_kind: ClassVar[StateKind] = "momentum"
 
     def system(self) -> SeparableHamiltonian:
         return SeparableHamiltonian(_kinetic, _chain_potential)
@@ -264,16 +248,12 @@ class FermiPastaUlamChain(AbstractScene):
     $x_{0,j} = (q_{2j} + q_{2j-1})/\sqrt2$.
     """
 
-    frequency: jax.Array
-    pairs: int = eqx.field(static=True)
+    frequency: jax.Array = parameter(50.0, positive=True)
+    pairs: int = count(3)
 
     default_t1: ClassVar[float] = 200.0
     default_dt: ClassVar[float] = 0.02
-    state_kind: ClassVar[str] = "momentum"
-
-    def __init__(self, frequency=50.0, pairs=3):
-        self.frequency = jnp.asarray(frequency)
-        self.pairs = int(pairs)
+    state_kind: ClassVar[StateKind] = "momentum"
 
     def system(self) -> SeparableHamiltonian:
         return SeparableHamiltonian(_kinetic, _fpu_potential)

@@ -25,6 +25,7 @@ O'Reilly, Nonlinear Dynamics 10, 287 (1996) (steady motions of a rolling disk).
 
 from __future__ import annotations
 
+import math
 from typing import ClassVar
 
 import jax
@@ -32,7 +33,13 @@ import jax.numpy as jnp
 
 from lagjax.mechanics.constraints import Constraints
 from lagjax.mechanics.lagrangian import Lagrangian
-from lagjax.scenes.base import AbstractScene, parameter
+from lagjax.scenes.base import (
+    BELOW_THE_TOP,
+    AbstractScene,
+    Interval,
+    StateKind,
+    parameter,
+)
 from lagjax.scenes.rotating import BeadOnRotatingWire
 
 
@@ -69,14 +76,14 @@ class CartesianPendulum(AbstractScene):
     `amplitude` θ₀ (2 rad).
     """
 
-    mass: jax.Array = parameter(1.0)
-    length: jax.Array = parameter(1.0)
-    gravity: jax.Array = parameter(9.81)
-    amplitude: jax.Array = parameter(2.0)
+    mass: jax.Array = parameter(1.0, positive=True)
+    length: jax.Array = parameter(1.0, positive=True)
+    gravity: jax.Array = parameter(9.81, positive=True)
+    amplitude: jax.Array = parameter(2.0, within=BELOW_THE_TOP, angle=True)
 
     default_t1: ClassVar[float] = 5.0
     default_dt: ClassVar[float] = 0.005
-    state_kind: ClassVar[str] = "velocity"
+    state_kind: ClassVar[StateKind] = "velocity"
 
     def system(self) -> Lagrangian:
         return Lagrangian(_free_mass_in_gravity, constraints=_rod)
@@ -127,16 +134,16 @@ class CartesianAtwoodMachine(AbstractScene):
     `gravity` (9.81 m/s²), `initial_depth` y₁(0) (1 m), `initial_velocity` (0 m/s).
     """
 
-    mass_1: jax.Array = parameter(3.0)
-    mass_2: jax.Array = parameter(1.0)
-    rope_length: jax.Array = parameter(2.0)
+    mass_1: jax.Array = parameter(3.0, positive=True)
+    mass_2: jax.Array = parameter(1.0, nonnegative=True)  # 0: free fall
+    rope_length: jax.Array = parameter(2.0, positive=True)
     gravity: jax.Array = parameter(9.81)
     initial_depth: jax.Array = parameter(1.0)
     initial_velocity: jax.Array = parameter(0.0)
 
     default_t1: ClassVar[float] = 0.5
     default_dt: ClassVar[float] = 0.5 / 400
-    state_kind: ClassVar[str] = "velocity"
+    state_kind: ClassVar[StateKind] = "velocity"
 
     def system(self) -> Lagrangian:
         return Lagrangian(_two_hanging_masses, constraints=_rope)
@@ -184,7 +191,7 @@ def _turning_wire(q, t, scene):
 
 
 class CartesianRotatingWireBead(AbstractScene):
-    r"""`BeadOnRotatingWire` in Cartesian coordinates: a rheonomic constraint.
+    r"""The bead on a rotating wire in Cartesian coordinates: a rheonomic constraint.
 
     $L = \tfrac12 m(\dot x^2 + \dot y^2)$ with $g(x, y, t) = x\sin\omega t -
     y\cos\omega t = 0$ (the bead stays on the line at angle ωt). The radius
@@ -198,11 +205,11 @@ class CartesianRotatingWireBead(AbstractScene):
     """
 
     angular_velocity: jax.Array = parameter(2.0)
-    mass: jax.Array = parameter(1.0)
+    mass: jax.Array = parameter(1.0, positive=True)
 
     default_t1: ClassVar[float] = 2.0
     default_dt: ClassVar[float] = 1e-3
-    state_kind: ClassVar[str] = "velocity"
+    state_kind: ClassVar[StateKind] = "velocity"
 
     def generalized(self) -> BeadOnRotatingWire:
         """The same bead in the generalized coordinate r (closed forms)."""
@@ -283,6 +290,12 @@ def _no_slip(q, qdot, t, scene):
     return _contact_point_velocity(q, qdot, scene)[:2]
 
 
+# Tilt from the vertical: at ±π/2 the disk lies flat on the floor.
+_OFF_THE_GROUND = Interval(
+    -math.pi / 2, math.pi / 2, include_low=False, include_high=False
+)
+
+
 class RollingDisk(AbstractScene):
     r"""A thin disk rolling without slipping on a plane: nonholonomic constraints.
 
@@ -307,16 +320,16 @@ class RollingDisk(AbstractScene):
     `tilt` θ₀ (0.3 rad), `heading_rate` φ̇₀ (3 rad/s), `spin_rate` ψ̇₀ (−15 rad/s).
     """
 
-    mass: jax.Array = parameter(1.0)
-    radius: jax.Array = parameter(0.1)
-    gravity: jax.Array = parameter(9.81)
-    tilt: jax.Array = parameter(0.3)
+    mass: jax.Array = parameter(1.0, positive=True)
+    radius: jax.Array = parameter(0.1, positive=True)
+    gravity: jax.Array = parameter(9.81, positive=True)
+    tilt: jax.Array = parameter(0.3, within=_OFF_THE_GROUND, angle=True)
     heading_rate: jax.Array = parameter(3.0)
     spin_rate: jax.Array = parameter(-15.0)
 
     default_t1: ClassVar[float] = 3.0
     default_dt: ClassVar[float] = 1e-3
-    state_kind: ClassVar[str] = "velocity"
+    state_kind: ClassVar[StateKind] = "velocity"
 
     def moments(self) -> tuple[jax.Array, jax.Array]:
         """(I₁ about a diameter, I₃ about the axis) of a thin uniform disk."""

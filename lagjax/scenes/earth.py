@@ -21,7 +21,7 @@ import jax.numpy as jnp
 from jax.typing import ArrayLike
 
 from lagjax.mechanics.lagrangian import Lagrangian
-from lagjax.scenes.base import AbstractScene, parameter
+from lagjax.scenes.base import LATITUDE, AbstractScene, StateKind, parameter
 from lagjax.scenes.rotating import rotating_kinetic_energy
 
 EARTH_RATE = 7.2921159e-5  # sidereal angular velocity of the Earth, rad/s
@@ -73,7 +73,7 @@ def _weighted_slope(ts: jax.Array, values: jax.Array) -> jax.Array:
 
 
 class FoucaultPendulum(AbstractScene):
-    r"""A spherical pendulum in the Earth's rotating frame, $q = (x, y)$ (south, east).
+    r"""A spherical pendulum in the Earth's rotating frame, q = (x, y) (south, east).
 
     $$ L = \tfrac12 m|\dot{\mathbf r} + \boldsymbol\omega_E\times\mathbf r|^2 - mgz,
        \qquad \mathbf r = (x, y, -\sqrt{l^2 - x^2 - y^2}). $$
@@ -99,16 +99,16 @@ class FoucaultPendulum(AbstractScene):
     `gravity` (9.81), `amplitude` (0.1 m), `earth_rate` (7.292·10⁻⁵ rad/s), `mass`.
     """
 
-    latitude: jax.Array = parameter(jnp.pi / 4)
-    length: jax.Array = parameter(9.81)
-    gravity: jax.Array = parameter(9.81)
-    amplitude: jax.Array = parameter(0.1)
+    latitude: jax.Array = parameter(jnp.pi / 4, within=LATITUDE, angle=True)
+    length: jax.Array = parameter(9.81, positive=True)
+    gravity: jax.Array = parameter(9.81, positive=True)
+    amplitude: jax.Array = parameter(0.1, positive=True)
     earth_rate: jax.Array = parameter(EARTH_RATE)
-    mass: jax.Array = parameter(1.0)
+    mass: jax.Array = parameter(1.0, positive=True)
 
     default_t1: ClassVar[float] = 300.0
     default_dt: ClassVar[float] = 0.05
-    state_kind: ClassVar[str] = "velocity"
+    state_kind: ClassVar[StateKind] = "velocity"
 
     def system(self) -> Lagrangian:
         return Lagrangian(_foucault_lagrangian, quadratic_in_velocity=True)
@@ -157,7 +157,7 @@ class FoucaultPendulum(AbstractScene):
 
 
 class EastwardDeflection(AbstractScene):
-    r"""A body dropped from rest at height $h$, in the local Earth frame (south, east, up).
+    r"""A body dropped from rest at height h, in the local Earth frame (south, east, up).
 
     $$ L = \tfrac12 m|\dot{\mathbf r} + \boldsymbol\omega_E\times\mathbf r|^2 - mgz. $$
 
@@ -175,15 +175,15 @@ class EastwardDeflection(AbstractScene):
     `drop_height` (100 m), `earth_rate`, `mass`.
     """
 
-    latitude: jax.Array = parameter(jnp.pi / 4)
-    drop_height: jax.Array = parameter(100.0)
-    gravity: jax.Array = parameter(9.81)
+    latitude: jax.Array = parameter(jnp.pi / 4, within=LATITUDE, angle=True)
+    drop_height: jax.Array = parameter(100.0, positive=True)
+    gravity: jax.Array = parameter(9.81, positive=True)
     earth_rate: jax.Array = parameter(EARTH_RATE)
-    mass: jax.Array = parameter(1.0)
+    mass: jax.Array = parameter(1.0, positive=True)
 
     default_t1: ClassVar[float] = 4.5  # ≈ √(2h/g) for h = 100 m
     default_dt: ClassVar[float] = 0.01
-    state_kind: ClassVar[str] = "velocity"
+    state_kind: ClassVar[StateKind] = "velocity"
 
     def system(self) -> Lagrangian:
         return Lagrangian(_local_earth_lagrangian, quadratic_in_velocity=True)
@@ -228,7 +228,7 @@ def _plumb_lagrangian(q, qdot, t, scene):
 
 
 class PlumbLine(AbstractScene):
-    r"""A plumb bob hung at geocentric latitude $\varphi$ on a spherical rotating Earth.
+    r"""A plumb bob hung at geocentric latitude φ on a spherical rotating Earth.
 
     $q = (x, y)$: the bob's offsets south and east of the suspension point, in the
     local axes whose $z$ is the geocentric vertical; $\boldsymbol\rho = R\hat z +
@@ -250,16 +250,16 @@ class PlumbLine(AbstractScene):
     `gravitational_parameter` (GM), `earth_rate`, `mass`.
     """
 
-    latitude: jax.Array = parameter(jnp.pi / 4)
-    length: jax.Array = parameter(1.0)
-    earth_radius: jax.Array = parameter(6.371e6)
-    gravitational_parameter: jax.Array = parameter(3.986004418e14)
+    latitude: jax.Array = parameter(jnp.pi / 4, within=LATITUDE, angle=True)
+    length: jax.Array = parameter(1.0, positive=True)
+    earth_radius: jax.Array = parameter(6.371e6, positive=True)
+    gravitational_parameter: jax.Array = parameter(3.986004418e14, positive=True)
     earth_rate: jax.Array = parameter(EARTH_RATE)
-    mass: jax.Array = parameter(1.0)
+    mass: jax.Array = parameter(1.0, positive=True)
 
     default_t1: ClassVar[float] = 10.0
     default_dt: ClassVar[float] = 0.01
-    state_kind: ClassVar[str] = "velocity"
+    state_kind: ClassVar[StateKind] = "velocity"
 
     def system(self) -> Lagrangian:
         return Lagrangian(_plumb_lagrangian, quadratic_in_velocity=True)

@@ -26,10 +26,11 @@ from typing import ClassVar
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from lagjax.mechanics.hamiltonian import SeparableHamiltonian
 from lagjax.mechanics.lagrangian import Lagrangian
-from lagjax.scenes.base import AbstractScene
+from lagjax.scenes.base import AbstractScene, StateKind, concrete, parameter
 
 # --- Uniform gravity ------------------------------------------------------------------
 
@@ -45,7 +46,7 @@ class AbstractUniformAcceleration(AbstractScene):
     initial_position: eqx.AbstractVar[jax.Array]
     initial_velocity: eqx.AbstractVar[jax.Array]
 
-    state_kind: ClassVar[str] = "momentum"
+    state_kind: ClassVar[StateKind] = "momentum"
 
     @abc.abstractmethod
     def acceleration(self) -> jax.Array:
@@ -92,21 +93,13 @@ class FreeFall(AbstractUniformAcceleration):
     `initial_position` y₀ (0 m), `initial_velocity` v₀ (−5 m/s: thrown upwards).
     """
 
-    mass: jax.Array
-    gravity: jax.Array
-    initial_position: jax.Array
-    initial_velocity: jax.Array
+    mass: jax.Array = parameter(1.0, positive=True)
+    gravity: jax.Array = parameter(9.81)
+    initial_position: jax.Array = parameter(0.0)
+    initial_velocity: jax.Array = parameter(-5.0)
 
     default_t1: ClassVar[float] = 1.0
     default_dt: ClassVar[float] = 1.0 / 400  # saving at 401 points falls on steps
-
-    def __init__(
-        self, mass=1.0, gravity=9.81, initial_position=0.0, initial_velocity=-5.0
-    ):
-        self.mass = jnp.asarray(mass, dtype=float)
-        self.gravity = jnp.asarray(gravity, dtype=float)
-        self.initial_position = jnp.asarray(initial_position, dtype=float)
-        self.initial_velocity = jnp.asarray(initial_velocity, dtype=float)
 
     def system(self) -> SeparableHamiltonian:
         return SeparableHamiltonian(_free_fall_kinetic, _free_fall_potential)
@@ -144,31 +137,15 @@ class AtwoodMachine(AbstractUniformAcceleration):
     v₀ (0 m/s). The closed form holds while both masses hang, 0 < y < l.
     """
 
-    mass_1: jax.Array
-    mass_2: jax.Array
-    rope_length: jax.Array
-    gravity: jax.Array
-    initial_position: jax.Array
-    initial_velocity: jax.Array
+    mass_1: jax.Array = parameter(3.0, positive=True)
+    mass_2: jax.Array = parameter(1.0, nonnegative=True)  # 0: free fall
+    rope_length: jax.Array = parameter(2.0, positive=True)
+    gravity: jax.Array = parameter(9.81)
+    initial_position: jax.Array = parameter(1.0)
+    initial_velocity: jax.Array = parameter(0.0)
 
     default_t1: ClassVar[float] = 0.5
     default_dt: ClassVar[float] = 0.5 / 400  # saving at 401 points falls on steps
-
-    def __init__(
-        self,
-        mass_1=3.0,
-        mass_2=1.0,
-        rope_length=2.0,
-        gravity=9.81,
-        initial_position=1.0,
-        initial_velocity=0.0,
-    ):
-        self.mass_1 = jnp.asarray(mass_1, dtype=float)
-        self.mass_2 = jnp.asarray(mass_2, dtype=float)
-        self.rope_length = jnp.asarray(rope_length, dtype=float)
-        self.gravity = jnp.asarray(gravity, dtype=float)
-        self.initial_position = jnp.asarray(initial_position, dtype=float)
-        self.initial_velocity = jnp.asarray(initial_velocity, dtype=float)
 
     def system(self) -> SeparableHamiltonian:
         return SeparableHamiltonian(_atwood_kinetic, _atwood_potential)
@@ -260,29 +237,26 @@ class ChargeInUniformFields(AbstractScene):
     `initial_velocity` ((1, 0, 0.1)). Starts at the origin at t = 0.
     """
 
-    mass: jax.Array
-    charge: jax.Array
-    magnetic_field: jax.Array
-    electric_field: jax.Array
-    initial_velocity: jax.Array
+    mass: jax.Array = parameter(1.0, positive=True)
+    charge: jax.Array = parameter(1.0)
+    magnetic_field: jax.Array = parameter((0.0, 0.0, 1.0))
+    electric_field: jax.Array = parameter((0.2, 0.0, 0.0))
+    initial_velocity: jax.Array = parameter((1.0, 0.0, 0.1))
 
     default_t1: ClassVar[float] = 3 * 2 * jnp.pi
     default_dt: ClassVar[float] = 3 * 2 * jnp.pi / 400  # 401 saved points on steps
-    state_kind: ClassVar[str] = "velocity"
+    state_kind: ClassVar[StateKind] = "velocity"
 
-    def __init__(
-        self,
-        mass=1.0,
-        charge=1.0,
-        magnetic_field=(0.0, 0.0, 1.0),
-        electric_field=(0.2, 0.0, 0.0),
-        initial_velocity=(1.0, 0.0, 0.1),
-    ):
-        self.mass = jnp.asarray(mass, dtype=float)
-        self.charge = jnp.asarray(charge, dtype=float)
-        self.magnetic_field = jnp.asarray(magnetic_field, dtype=float)
-        self.electric_field = jnp.asarray(electric_field, dtype=float)
-        self.initial_velocity = jnp.asarray(initial_velocity, dtype=float)
+    def __check_init__(self):
+        values = concrete(self.charge, self.magnetic_field)
+        if values is None:
+            return  # traced (vmap, jit): not checked, see lagjax.scenes.base
+        charge, field = values
+        if np.any(charge == 0) or np.any(np.linalg.norm(field, axis=-1) == 0):
+            raise ValueError(
+                "ChargeInUniformFields needs a non-zero charge and magnetic_field: "
+                "its closed forms turn on the cyclotron frequency eB/m"
+            )
 
     def system(self) -> Lagrangian:
         return Lagrangian(_charge_lagrangian, quadratic_in_velocity=True)

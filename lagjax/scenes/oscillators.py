@@ -23,10 +23,11 @@ from typing import ClassVar
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from lagjax.mechanics.hamiltonian import SeparableHamiltonian
 from lagjax.mechanics.lagrangian import Lagrangian
-from lagjax.scenes.base import AbstractScene
+from lagjax.scenes.base import AbstractScene, StateKind, concrete, parameter
 
 
 def angle_advance(start: jax.Array, angles: jax.Array) -> jax.Array:
@@ -93,16 +94,12 @@ class HarmonicOscillator(AbstractScene):
     oscillator); the course text §5.
     """
 
-    mass: jax.Array
-    stiffness: jax.Array
+    mass: jax.Array = parameter(1.0, positive=True)
+    stiffness: jax.Array = parameter(4.0, positive=True)
 
     default_t1: ClassVar[float] = 10.0
     default_dt: ClassVar[float] = 0.01
-    state_kind: ClassVar[str] = "momentum"
-
-    def __init__(self, mass=1.0, stiffness=4.0):
-        self.mass = jnp.asarray(mass)
-        self.stiffness = jnp.asarray(stiffness)
+    state_kind: ClassVar[StateKind] = "momentum"
 
     def system(self) -> SeparableHamiltonian:
         return SeparableHamiltonian(_harmonic_kinetic, _harmonic_potential)
@@ -163,6 +160,11 @@ def _coupled_potential(q, t, scene):
     return 0.5 * q @ scene.stiffness @ q
 
 
+def _stiffness_matrix(stiffness: jax.Array) -> jax.Array:
+    """A vector of diagonal entries becomes the diagonal matrix."""
+    return jnp.diag(stiffness) if stiffness.ndim == 1 else stiffness
+
+
 class CoupledOscillators(AbstractScene):
     r"""n masses coupled by a symmetric positive definite stiffness matrix K.
 
@@ -184,21 +186,15 @@ class CoupledOscillators(AbstractScene):
     Goldstein, Poole & Safko §6.2–6.3 and §10.6.
     """
 
-    masses: jax.Array
-    stiffness: jax.Array
+    masses: jax.Array = parameter((1.0, 2.0, 0.5), positive=True)
+    stiffness: jax.Array = parameter(
+        ((5.0, -2.0, 1.0), (-2.0, 4.0, -1.0), (1.0, -1.0, 3.0)),
+        convert=_stiffness_matrix,
+    )
 
     default_t1: ClassVar[float] = 20.0
     default_dt: ClassVar[float] = 0.01
-    state_kind: ClassVar[str] = "momentum"
-
-    def __init__(
-        self,
-        masses=(1.0, 2.0, 0.5),
-        stiffness=((5.0, -2.0, 1.0), (-2.0, 4.0, -1.0), (1.0, -1.0, 3.0)),
-    ):
-        self.masses = jnp.asarray(masses, dtype=float)
-        stiffness = jnp.asarray(stiffness, dtype=float)
-        self.stiffness = jnp.diag(stiffness) if stiffness.ndim == 1 else stiffness
+    state_kind: ClassVar[StateKind] = "momentum"
 
     def __check_init__(self):
         n = self.masses.shape[-1]
@@ -206,6 +202,17 @@ class CoupledOscillators(AbstractScene):
             raise ValueError(
                 f"stiffness must be ({n}, {n}) or ({n},) for {n} masses, "
                 f"got shape {self.stiffness.shape}"
+            )
+        values = concrete(self.stiffness)
+        if values is None:
+            return  # traced (vmap, jit): not checked, see lagjax.scenes.base
+        (stiffness,) = values
+        if not np.allclose(stiffness, np.swapaxes(stiffness, -1, -2)):
+            raise ValueError("stiffness must be a symmetric matrix (K = Kᵀ)")
+        if np.any(np.linalg.eigvalsh(stiffness) <= 0):
+            raise ValueError(
+                "stiffness must be positive definite: a zero or negative "
+                "eigenvalue is a free or unstable direction, with no oscillation"
             )
 
     def system(self) -> SeparableHamiltonian:
@@ -318,29 +325,26 @@ class DampedDrivenOscillator(AbstractScene):
     §1.5 (Rayleigh's dissipation function).
     """
 
-    mass: jax.Array
-    stiffness: jax.Array
-    damping: jax.Array
-    drive_amplitude: jax.Array
-    drive_frequency: jax.Array
+    mass: jax.Array = parameter(1.0, positive=True)
+    stiffness: jax.Array = parameter(4.0, positive=True)
+    damping: jax.Array = parameter(1.0, nonnegative=True)
+    drive_amplitude: jax.Array = parameter(1.0)
+    drive_frequency: jax.Array = parameter(1.5, nonnegative=True)
 
     default_t1: ClassVar[float] = 60.0
     default_dt: ClassVar[float] = 0.01
-    state_kind: ClassVar[str] = "velocity"
+    state_kind: ClassVar[StateKind] = "velocity"
 
-    def __init__(
-        self,
-        mass=1.0,
-        stiffness=4.0,
-        damping=1.0,
-        drive_amplitude=1.0,
-        drive_frequency=1.5,
-    ):
-        self.mass = jnp.asarray(mass)
-        self.stiffness = jnp.asarray(stiffness)
-        self.damping = jnp.asarray(damping)
-        self.drive_amplitude = jnp.asarray(drive_amplitude)
-        self.drive_frequency = jnp.asarray(drive_frequency)
+    def __check_init__(self):
+        values = concrete(self.mass, self.stiffness, self.damping)
+        if values is None:
+            return  # traced (vmap, jit): not checked, see lagjax.scenes.base
+        mass, stiffness, damping = values
+        if np.any(damping >= 2 * np.sqrt(stiffness / mass)):
+            raise ValueError(
+                "DampedDrivenOscillator's closed forms are for the underdamped case: "
+                f"damping must be below 2√(k/m) = {2 * np.sqrt(stiffness / mass)}"
+            )
 
     def system(self) -> Lagrangian:
         return Lagrangian(

@@ -25,7 +25,7 @@ import jax.numpy as jnp
 
 from lagjax.mechanics.hamiltonian import SeparableHamiltonian
 from lagjax.mechanics.lagrangian import Lagrangian
-from lagjax.scenes.base import AbstractScene
+from lagjax.scenes.base import BELOW_THE_TOP, AbstractScene, StateKind, parameter
 from lagjax.signals import zero_crossing_times
 from lagjax.special import complete_elliptic_k_from_complement
 
@@ -63,22 +63,16 @@ class SimplePendulum(AbstractScene):
     17.3 and 17.6.
     """
 
-    mass: jax.Array
-    length: jax.Array
-    gravity: jax.Array
-    amplitude: jax.Array
+    mass: jax.Array = parameter(1.0, positive=True)
+    length: jax.Array = parameter(1.0, positive=True)
+    gravity: jax.Array = parameter(9.81, positive=True)
+    amplitude: jax.Array = parameter(
+        _DEFAULT_AMPLITUDE, within=BELOW_THE_TOP, angle=True
+    )
 
     default_t1: ClassVar[float] = 5.0
     default_dt: ClassVar[float] = 0.01
-    state_kind: ClassVar[str] = "momentum"
-
-    def __init__(
-        self, mass=1.0, length=1.0, gravity=9.81, amplitude=_DEFAULT_AMPLITUDE
-    ):
-        self.mass = jnp.asarray(mass)
-        self.length = jnp.asarray(length)
-        self.gravity = jnp.asarray(gravity)
-        self.amplitude = jnp.asarray(amplitude)
+    state_kind: ClassVar[StateKind] = "momentum"
 
     def system(self) -> SeparableHamiltonian:
         return SeparableHamiltonian(_pendulum_kinetic, _pendulum_potential)
@@ -153,18 +147,13 @@ class DoublePendulum(AbstractScene):
     Safko §6.2–6.3; Landau & Lifshitz, *Mechanics*, §23.
     """
 
-    masses: jax.Array
-    lengths: jax.Array
-    gravity: jax.Array
+    masses: jax.Array = parameter((1.0, 1.0), positive=True)
+    lengths: jax.Array = parameter((1.0, 1.0), positive=True)
+    gravity: jax.Array = parameter(9.81, positive=True)
 
     default_t1: ClassVar[float] = 10.0
     default_dt: ClassVar[float] = 0.0025
-    state_kind: ClassVar[str] = "velocity"
-
-    def __init__(self, masses=(1.0, 1.0), lengths=(1.0, 1.0), gravity=9.81):
-        self.masses = jnp.asarray(masses, dtype=float)
-        self.lengths = jnp.asarray(lengths, dtype=float)
-        self.gravity = jnp.asarray(gravity)
+    state_kind: ClassVar[StateKind] = "velocity"
 
     def system(self) -> Lagrangian:
         return Lagrangian(_double_pendulum_lagrangian, quadratic_in_velocity=True)

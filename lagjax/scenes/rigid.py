@@ -7,7 +7,7 @@ Each scene gives its physics two ways that must agree:
   at $\sin\theta = 0$ (gimbal lock), so the defaults start well away from it;
 - `rigid_body()` with `initial_body_state()`: the same body as a `RigidBody` on
   `(quaternion, body angular momentum)`, for the Lie–Poisson solvers of
-  `lagjax.solvers.rigid`; integrate it with `args=scene`.
+  `lagjax.solvers.lie_poisson`; integrate it with `args=scene`.
 
 Known answers: the symmetric body's precession rate (course text eq. 4.47), the
 asymmetric body's period (elliptic K), the top's nutation bounds (roots of the
@@ -37,7 +37,7 @@ from lagjax.rigid.heavy_top import nutation_bounds
 from lagjax.rigid.quaternion import quaternion_to_matrix
 from lagjax.signals import zero_crossing_times
 
-from .base import AbstractScene, parameter
+from .base import AbstractScene, StateKind, parameter
 
 
 def euler_rates_from_body_omega(angles: jax.Array, omega_body: jax.Array) -> jax.Array:
@@ -100,23 +100,13 @@ class TorqueFreeBody(AbstractScene):
     Goldstein, Poole & Safko, *Classical Mechanics*, 3rd ed., §5.6.
     """
 
-    moments: jax.Array
-    omega0: jax.Array
-    angles0: jax.Array
+    moments: jax.Array = parameter((1.0, 2.0, 3.0), positive=True)
+    omega0: jax.Array = parameter((1e-3, 1.0, 1e-3))
+    angles0: jax.Array = parameter((0.3, math.pi / 2, 0.0), angle=True)
 
     default_t1: ClassVar[float] = 60.0
     default_dt: ClassVar[float] = 0.01
-    state_kind: ClassVar[str] = "velocity"
-
-    def __init__(
-        self,
-        moments: Any = (1.0, 2.0, 3.0),
-        omega0: Any = (1e-3, 1.0, 1e-3),
-        angles0: Any = (0.3, math.pi / 2, 0.0),
-    ):
-        self.moments = jnp.asarray(moments, dtype=float)
-        self.omega0 = jnp.asarray(omega0, dtype=float)
-        self.angles0 = jnp.asarray(angles0, dtype=float)
+    state_kind: ClassVar[StateKind] = "velocity"
 
     def system(self) -> Lagrangian:
         return Lagrangian(_free_body_lagrangian, quadratic_in_velocity=True)
@@ -197,35 +187,17 @@ class HeavySymmetricTop(AbstractScene):
     Landau & Lifshitz, *Mechanics*, §35.
     """
 
-    i1: jax.Array
-    i3: jax.Array
-    mgl: jax.Array
-    theta0: jax.Array
-    spin: jax.Array
-    phi_dot0: jax.Array
-    theta_dot0: jax.Array
+    i1: jax.Array = parameter(1.0, positive=True)
+    i3: jax.Array = parameter(0.5, positive=True)
+    mgl: jax.Array = parameter(1.0)
+    theta0: jax.Array = parameter(0.5, angle=True)
+    spin: jax.Array = parameter(40.0)
+    phi_dot0: jax.Array = parameter(0.0)
+    theta_dot0: jax.Array = parameter(0.0)
 
     default_t1: ClassVar[float] = 5.0
     default_dt: ClassVar[float] = 1e-3
-    state_kind: ClassVar[str] = "velocity"
-
-    def __init__(
-        self,
-        i1: Any = 1.0,
-        i3: Any = 0.5,
-        mgl: Any = 1.0,
-        theta0: Any = 0.5,
-        spin: Any = 40.0,
-        phi_dot0: Any = 0.0,
-        theta_dot0: Any = 0.0,
-    ):
-        self.i1, self.i3, self.mgl = (
-            jnp.asarray(x, dtype=float) for x in (i1, i3, mgl)
-        )
-        self.theta0 = jnp.asarray(theta0, dtype=float)
-        self.spin = jnp.asarray(spin, dtype=float)
-        self.phi_dot0 = jnp.asarray(phi_dot0, dtype=float)
-        self.theta_dot0 = jnp.asarray(theta_dot0, dtype=float)
+    state_kind: ClassVar[StateKind] = "velocity"
 
     def system(self) -> Lagrangian:
         return Lagrangian(_heavy_top_lagrangian, quadratic_in_velocity=True)
@@ -269,13 +241,13 @@ class EarthFreePrecession(AbstractScene):
     r"""The Earth as a rigid oblate body: its spin axis wobbles about the figure axis.
 
     The torque-free symmetric body of the course text §4.7 with Earth's numbers:
-    $I_1 = I_2 = A$, $I_3 = C$, $(C - A)/A pprox 1/305$, spin $\omega_3 =
+    $I_1 = I_2 = A$, $I_3 = C$, $(C - A)/A \approx 1/305$, spin $\omega_3 =
     2\pi/$sidereal day. If the rotation axis is off the figure axis by a small
-    angle α, $oldsymbol\omega$ circles the figure axis in the body frame at
+    angle α, $\boldsymbol\omega$ circles the figure axis in the body frame at
 
-    $$ \Omega = rac{C - A}{A}\,\omega_3, \qquad
-       T = rac{2\pi}{\Omega} = rac{A}{C - A}\ 	ext{sidereal days}
-       pprox 305\ 	ext{days} $$
+    $$ \Omega = \frac{C - A}{A}\,\omega_3, \qquad
+       T = \frac{2\pi}{\Omega} = \frac{A}{C - A}\ \text{sidereal days}
+       \approx 305\ \text{days} $$
 
     (eq. 4.47 with $I_1 > I_3$ reversed: an oblate body precesses *with* the spin),
     keeping α constant. This is Euler's free nutation. The wobble the Earth shows —
@@ -300,11 +272,11 @@ class EarthFreePrecession(AbstractScene):
 
     ellipticity: jax.Array = parameter(1 / 305)
     spin: jax.Array = parameter(2 * math.pi / SIDEREAL_DAY)
-    wobble: jax.Array = parameter(1e-6)
+    wobble: jax.Array = parameter(1e-6, nonnegative=True, angle=True)
 
     default_t1: ClassVar[float] = 400 * DAY
     default_dt: ClassVar[float] = 1200.0
-    state_kind: ClassVar[str] = "velocity"
+    state_kind: ClassVar[StateKind] = "velocity"
 
     def body(self) -> TorqueFreeBody:
         """The same motion as a `TorqueFreeBody` (moments in units of A)."""

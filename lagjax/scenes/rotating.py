@@ -40,7 +40,7 @@ import jax.numpy as jnp
 from jax.typing import ArrayLike
 
 from lagjax.mechanics.lagrangian import Lagrangian
-from lagjax.scenes.base import AbstractScene, parameter
+from lagjax.scenes.base import AbstractScene, StateKind, parameter
 
 
 def rotate(axis: jax.Array, angle: ArrayLike, vector: jax.Array) -> jax.Array:
@@ -99,7 +99,7 @@ class AbstractMovingFrameParticle(AbstractScene):
 
     default_t1: ClassVar[float] = 3.0
     default_dt: ClassVar[float] = 1e-3
-    state_kind: ClassVar[str] = "velocity"
+    state_kind: ClassVar[StateKind] = "velocity"
 
     @abc.abstractmethod
     def to_inertial(self, position: jax.Array, t: ArrayLike) -> jax.Array:
@@ -129,8 +129,9 @@ class AbstractMovingFrameParticle(AbstractScene):
 
 
 class SpinningFrameParticle(AbstractMovingFrameParticle):
-    r"""The frame turns by $\theta(t) = \omega_0 t + \tfrac12\alpha t^2$ about a fixed axis.
+    r"""A particle under gravity, seen from a frame spinning up about a fixed axis.
 
+    The frame turns by $\theta(t) = \omega_0 t + \tfrac12\alpha t^2$:
     $\mathbf x = R_{\hat n}(\theta(t))\,\mathbf r'$, so $\boldsymbol\omega =
     (\omega_0 + \alpha t)\hat n$ and $\dot{\boldsymbol\omega} = \alpha\hat n$ (the
     same components in both frames). Coriolis, centrifugal and Euler forces all come
@@ -146,7 +147,7 @@ class SpinningFrameParticle(AbstractMovingFrameParticle):
     spin_acceleration: jax.Array = parameter(0.5)
     axis: jax.Array = parameter((0.0, 0.5, 0.75**0.5))
     gravity: jax.Array = parameter((0.0, 0.0, -9.81))
-    mass: jax.Array = parameter(1.0)
+    mass: jax.Array = parameter(1.0, positive=True)
 
     def unit_axis(self) -> jax.Array:
         return self.axis / jnp.sqrt(jnp.sum(self.axis**2))
@@ -177,9 +178,10 @@ class SpinningFrameParticle(AbstractMovingFrameParticle):
 
 
 class AcceleratedFrameParticle(AbstractMovingFrameParticle):
-    r"""The frame's origin moves on $\mathbf R(t) = \tfrac12\mathbf a t^2 + \mathbf b\sin\nu t$.
+    r"""A particle under gravity, seen from a frame that accelerates and shakes.
 
-    Its axes stay parallel to the inertial ones: $\mathbf x = \mathbf r' +
+    The frame's origin moves on
+    $\mathbf R(t) = \tfrac12\mathbf a t^2 + \mathbf b\sin\nu t$; its axes stay parallel to the inertial ones: $\mathbf x = \mathbf r' +
     \mathbf R(t)$, so $L = \tfrac12 m|\dot{\mathbf r}' + \dot{\mathbf R}|^2 +
     m\,\mathbf g\cdot(\mathbf r' + \mathbf R)$ and $\ddot{\mathbf r}' = \mathbf g -
     \ddot{\mathbf R}(t)$: the fictitious force $-m\ddot{\mathbf R}$ (the course text
@@ -194,7 +196,7 @@ class AcceleratedFrameParticle(AbstractMovingFrameParticle):
     shake_amplitude: jax.Array = parameter((0.0, 0.5, 0.0))
     shake_frequency: jax.Array = parameter(3.0)
     gravity: jax.Array = parameter((0.0, 0.0, -9.81))
-    mass: jax.Array = parameter(1.0)
+    mass: jax.Array = parameter(1.0, positive=True)
 
     def origin(self, t: ArrayLike) -> jax.Array:
         """R(t) = a t²/2 + b sin νt."""
@@ -226,7 +228,7 @@ def _wire_lagrangian(q, qdot, t, scene):
 
 
 class BeadOnRotatingWire(AbstractScene):
-    r"""A bead sliding freely on a straight wire turning at $\omega$ in a plane.
+    r"""A bead sliding freely on a straight wire turning at rate ω in a plane.
 
     The constraint $x = r\cos\omega t$, $y = r\sin\omega t$ depends on time
     (rheonomic); composing $T = \tfrac12 m(\dot x^2 + \dot y^2)$ with it gives
@@ -241,11 +243,11 @@ class BeadOnRotatingWire(AbstractScene):
     """
 
     angular_velocity: jax.Array = parameter(2.0)
-    mass: jax.Array = parameter(1.0)
+    mass: jax.Array = parameter(1.0, positive=True)
 
     default_t1: ClassVar[float] = 2.0
     default_dt: ClassVar[float] = 1e-3
-    state_kind: ClassVar[str] = "velocity"
+    state_kind: ClassVar[StateKind] = "velocity"
 
     def system(self) -> Lagrangian:
         return Lagrangian(_wire_lagrangian, quadratic_in_velocity=True)
