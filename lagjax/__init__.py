@@ -5,6 +5,8 @@ derives the equations of motion, Legendre transforms, Poisson brackets and norma
 modes by automatic differentiation.
 """
 
+from importlib import metadata as _metadata
+
 from . import diagnostics as diagnostics
 from . import rigid as rigid
 from . import scenes as scenes
@@ -58,4 +60,8 @@ from .terms import RattleTerm as RattleTerm
 from .terms import RigidBodyTerm as RigidBodyTerm
 from .trajectory import Trajectory as Trajectory
 
-__version__ = "0.1.0"
+try:  # one source for the version: pyproject.toml, through the installed metadata
+    __version__ = _metadata.version("lagjax")
+except _metadata.PackageNotFoundError:  # a source tree that was never installed
+    __version__ = "0+unknown"
+del _metadata
