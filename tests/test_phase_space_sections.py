@@ -1,0 +1,104 @@
+"""Poincaré sections: crossings on the known curves, at the closed-form times."""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import lagjax as lj
+from lagjax.special import complete_elliptic_k
+
+OMEGA_X, OMEGA_Y = 1.0, np.sqrt(2.0)
+# Two uncoupled oscillators: every crossing of x = 0 upward lies on the ellipse
+# ½(p_y² + ω_y² y²) = E_y, with p_x = ω_x A, at the times ω_x t = π/2 + 2πk.
+OSCILLATORS = lj.SeparableHamiltonian(
+    lambda p: 0.5 * (p[0] ** 2 + p[1] ** 2),
+    lambda q: 0.5 * (OMEGA_X**2 * q[0] ** 2 + OMEGA_Y**2 * q[1] ** 2),
+)
+AMPLITUDES = jnp.array([1.0, 0.5])
+Y0, PY0 = jnp.array([0.3, 0.7]), jnp.array([0.2, -0.1])
+# x = −A cos(ω_x t): the first upward crossing is at ω_x t = π/2.
+STATES = (jnp.stack([-AMPLITUDES, Y0], 1), jnp.stack([0 * Y0, PY0], 1))
+
+
+def _oscillator_section(direction=+1, max_crossings=10):
+    return lj.poincare_section(
+        OSCILLATORS, STATES, 40.0, lambda q, p: q[0], direction=direction,
+        dt=0.01, solver=lj.Yoshida4(), max_crossings=max_crossings,
+    )  # fmt: skip
+
+
+def test_crossings_lie_on_the_invariant_ellipse_at_the_closed_form_times():
+    section = _oscillator_section()
+    np.testing.assert_array_equal(section.count, [7, 7])
+    exact = np.tile((np.pi / 2 + 2 * np.pi * np.arange(7)) / OMEGA_X, (2, 1))
+    # Yoshida4 at h = 0.01 runs the oscillator at a frequency off by ~7e-10
+    # (O(h⁴)): the located times carry that phase error, growing with t, and no more.
+    np.testing.assert_allclose(section.ts[:, :7], exact, rtol=1e-9, atol=0)
+    assert np.all(np.isnan(section.ts[:, 7:])) and np.all(np.isnan(section.q[:, 7:]))
+    stored_q, stored_p = section.q[:, :7], section.p[:, :7]
+    # Hénon's step lands on the surface to round-off, not to the step's accuracy.
+    assert np.max(np.abs(stored_q[..., 0])) < 1e-14
+    energy_y = 0.5 * (stored_p[..., 1] ** 2 + OMEGA_Y**2 * stored_q[..., 1] ** 2)
+    expected = 0.5 * (PY0**2 + OMEGA_Y**2 * Y0**2)
+    np.testing.assert_allclose(energy_y, np.tile(expected[:, None], 7), atol=1e-11)
+    np.testing.assert_allclose(
+        stored_p[..., 0], np.tile((OMEGA_X * AMPLITUDES)[:, None], 7), atol=1e-11
+    )
+
+
+def test_direction_selects_the_crossings():
+    both = _oscillator_section(direction=0, max_crossings=16)
+    down = _oscillator_section(direction=-1, max_crossings=16)
+    # Downward crossings at ω_x t = 3π/2 + 2πk, 6 of them before t = 40.
+    np.testing.assert_array_equal(down.count, [6, 6])
+    np.testing.assert_array_equal(both.count, [13, 13])
+    assert np.all(down.p[:, :6, 0] < 0)
+    np.testing.assert_allclose(
+        down.ts[0, :6], (1.5 * np.pi + 2 * np.pi * np.arange(6)) / OMEGA_X, rtol=1e-9
+    )
+
+
+def test_more_crossings_than_stored_are_counted():
+    section = _oscillator_section(max_crossings=3)
+    np.testing.assert_array_equal(section.count, [7, 7])
+    assert section.ts.shape == (2, 3) and np.all(np.isfinite(section.ts))
+
+
+def test_lagrangian_pendulum_crosses_at_three_quarter_periods():
+    # From rest at θ0 the pendulum passes θ = 0 upward at 3T/4 + kT, with
+    # T = 4K(sin²(θ0/2)) and momentum √(2(1 − cos θ0)).
+    theta0 = 1.2
+    pendulum = lj.Lagrangian(lambda q, qdot: 0.5 * qdot**2 + jnp.cos(q))
+    states = (jnp.asarray([theta0]), jnp.asarray([0.0]))
+    section = lj.poincare_section(
+        pendulum, states, 30.0, lambda q, p: q, dt=0.01, max_crossings=8
+    )
+    period = 4 * float(complete_elliptic_k(np.sin(theta0 / 2) ** 2))
+    count = int(section.count[0])
+    assert count == int((30.0 - 0.75 * period) // period) + 1
+    expected = 0.75 * period + period * np.arange(count)
+    np.testing.assert_allclose(section.ts[0, :count], expected, atol=1e-9)
+    np.testing.assert_allclose(
+        section.p[0, :count], np.sqrt(2 * (1 - np.cos(theta0))), atol=1e-10
+    )
+
+
+def test_bad_input_is_named():
+    with pytest.raises(ValueError, match="direction"):
+        lj.poincare_section(OSCILLATORS, STATES, 1.0, lambda q, p: q[0], dt=0.1,
+                            direction=2)  # fmt: skip
+    with pytest.raises(ValueError, match="fixed dt"):
+        lj.poincare_section(OSCILLATORS, STATES, 1.0, lambda q, p: q[0], dt=None)
+    with pytest.raises(ValueError, match="max_crossings"):
+        lj.poincare_section(OSCILLATORS, STATES, 1.0, lambda q, p: q[0], dt=0.1,
+                            max_crossings=0)  # fmt: skip
+
+
+def test_states_on_energy_shell_have_the_energy():
+    q = jnp.array([[0.0, 0.1], [0.0, 0.9], [0.0, -0.2]])
+    p = jnp.array([[0.0, 0.1], [0.0, 0.0], [5.0, -0.3]])
+    kept_q, kept_p = lj.states_on_energy_shell(OSCILLATORS, 0.125, (q, p), 0)
+    assert kept_q.shape == (2, 2)  # y = 0.9 has V > E: outside the shell
+    energies = [OSCILLATORS(a, b) for a, b in zip(kept_q, kept_p, strict=True)]
+    np.testing.assert_allclose(energies, 0.125, rtol=1e-13)
+    assert np.all(kept_p[:, 0] >= 0)
