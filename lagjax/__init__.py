@@ -8,6 +8,7 @@ modes by automatic differentiation.
 from importlib import metadata as _metadata
 
 from . import diagnostics as diagnostics
+from . import phase_space as phase_space
 from . import rigid as rigid
 from . import scenes as scenes
 from .hamilton_principle import action as action
@@ -34,6 +35,15 @@ from .mechanics.modes import stiffness_matrices as stiffness_matrices
 from .mechanics.particles import newtonian_gravity as newtonian_gravity
 from .mechanics.particles import particle_hamiltonian as particle_hamiltonian
 from .mechanics.particles import particle_lagrangian as particle_lagrangian
+from .phase_space import LyapunovSpectrum as LyapunovSpectrum
+from .phase_space import PoincareSection as PoincareSection
+from .phase_space import chaos_indicators as chaos_indicators
+from .phase_space import fast_lyapunov_indicator as fast_lyapunov_indicator
+from .phase_space import fundamental_frequencies as fundamental_frequencies
+from .phase_space import lyapunov_spectrum as lyapunov_spectrum
+from .phase_space import megno as megno
+from .phase_space import poincare_section as poincare_section
+from .phase_space import states_on_energy_shell as states_on_energy_shell
 from .rigid.body import RigidBody as RigidBody
 from .shooting import action_between as action_between
 from .shooting import trajectory_between as trajectory_between
