@@ -29,12 +29,19 @@ from .mechanics.hamiltonian import Hamiltonian as Hamiltonian
 from .mechanics.hamiltonian import LegendreHamiltonian as LegendreHamiltonian
 from .mechanics.hamiltonian import SeparableHamiltonian as SeparableHamiltonian
 from .mechanics.lagrangian import Lagrangian as Lagrangian
+from .mechanics.linearize import LinearizedSystem as LinearizedSystem
+from .mechanics.linearize import linearize as linearize
+from .mechanics.modes import NormalModes as NormalModes
 from .mechanics.modes import equilibrium as equilibrium
+from .mechanics.modes import gyroscopic_matrix as gyroscopic_matrix
 from .mechanics.modes import normal_modes as normal_modes
 from .mechanics.modes import stiffness_matrices as stiffness_matrices
 from .mechanics.particles import newtonian_gravity as newtonian_gravity
 from .mechanics.particles import particle_hamiltonian as particle_hamiltonian
 from .mechanics.particles import particle_lagrangian as particle_lagrangian
+from .mechanics.relative_equilibria import (
+    relative_equilibrium as relative_equilibrium,
+)
 from .phase_space import LyapunovSpectrum as LyapunovSpectrum
 from .phase_space import PoincareSection as PoincareSection
 from .phase_space import chaos_indicators as chaos_indicators

@@ -165,6 +165,7 @@ def _congruence(cholesky: jax.Array, matrix: jax.Array) -> jax.Array:
     return jsl.solve_triangular(cholesky, half.T, lower=True).T
 
 
+@jax.jit
 def _symmetric_modes(cholesky, stiffness) -> NormalModes:
     """The T/V path: an eigh of the symmetric, mass-normalised stiffness."""
     reduced = _congruence(cholesky, stiffness)
@@ -178,6 +179,7 @@ def _symmetric_modes(cholesky, stiffness) -> NormalModes:
     return NormalModes(omegas, modes, eigenvalues, codes, gyroscopic=False)
 
 
+@jax.jit
 def _gyroscopic_modes(cholesky, stiffness, gyro) -> NormalModes:
     """The first-order path: eig of [[0, 1], [−K̂, −Ĝ]], one eigenvalue per pair."""
     n = stiffness.shape[0]
@@ -208,6 +210,24 @@ def _gyroscopic_modes(cholesky, stiffness, gyro) -> NormalModes:
     modes = modes * (jnp.abs(biggest) / biggest)
     codes = stability.classify(lam, conservative=True)
     return NormalModes(omegas, modes, lam, codes, gyroscopic=True)
+
+
+# Compiled as a whole: op-by-op dispatch of the nested derivatives costs seconds.
+@eqx.filter_jit
+def _expansion(lag: Lagrangian, q_eq: Any, args: Any, t: Any):
+    """Cholesky factor of M, K, G, the residual generalized force M q̈(q_eq, 0),
+    and the norms (‖K̂‖, ‖Ĝ‖) of the mass-normalised K and G."""
+    q_flat, unravel = ravel_pytree(q_eq)
+    kinetic, potential = stiffness_matrices(lag, q_eq, args, t=t)
+    gyro = gyroscopic_matrix(lag, q_eq, args, t=t)
+    cholesky = _positive_cholesky(kinetic)
+    acceleration = lag.acceleration(q_eq, unravel(jnp.zeros_like(q_flat)), t, args)
+    residual = kinetic @ ravel_pytree(acceleration)[0]
+    norms = (
+        jnp.linalg.norm(_congruence(cholesky, potential)),
+        jnp.linalg.norm(_congruence(cholesky, gyro)),
+    )
+    return cholesky, potential, gyro, residual, norms
 
 
 def _refuse_unsupported(lag: Lagrangian) -> None:
@@ -286,13 +306,9 @@ def normal_modes(
     `linearize`.
     """
     _refuse_unsupported(lag)
-    q_flat, unravel = ravel_pytree(q_eq)
-    kinetic, potential = stiffness_matrices(lag, q_eq, args, t=t)
-    gyro = gyroscopic_matrix(lag, q_eq, args, t=t)
-    cholesky = _positive_cholesky(kinetic)
+    q_flat = ravel_pytree(q_eq)[0]
+    cholesky, potential, gyro, residual, norms = _expansion(lag, q_eq, args, t)
     if check_equilibrium:
-        acceleration = lag.acceleration(q_eq, unravel(jnp.zeros_like(q_flat)), t, args)
-        residual = kinetic @ ravel_pytree(acceleration)[0]
         cholesky = stability.check_stationary(
             cholesky,
             residual,
@@ -304,9 +320,7 @@ def normal_modes(
             "lj.relative_equilibrium), or pass check_equilibrium=False to expand "
             "about this point anyway.",
         )
-    k_hat_norm = jnp.linalg.norm(_congruence(cholesky, potential))
-    g_hat_norm = jnp.linalg.norm(_congruence(cholesky, gyro))
-    use_first_order, negligible = _choose_gyroscopic(gyroscopic, k_hat_norm, g_hat_norm)
+    use_first_order, negligible = _choose_gyroscopic(gyroscopic, *norms)
     if use_first_order:
         return _gyroscopic_modes(cholesky, potential, gyro)
     if stability.is_concrete(negligible):
