@@ -25,6 +25,7 @@ References:
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import Any, NamedTuple
 
@@ -96,6 +97,7 @@ def is_canonical(
         return call_with_arity(transform, arity, q_in, p_in, t, args)
 
     check_same_structure(q, p, "q", "p")
+    _check_image_sizes(phase_map, q, p)
     z, unravel = ravel_pytree((q, p))
 
     def flat_map(z_flat: jax.Array) -> jax.Array:
@@ -119,6 +121,30 @@ def is_canonical(
     defect = symplectic_defect(linear_map, z[:n], z[n:])
     scale = jnp.maximum(1.0, jnp.max(jnp.abs(jacobian))) ** 2
     return defect <= tol * scale
+
+
+def _check_image_sizes(phase_map: Callable, q: Any, p: Any) -> None:
+    """Trace-time check that `(Q, P) = phase_map(q, p)` pairs Q with q and P with p.
+
+    Only the total sizes are compared (Q may be an array where q is a tuple), but
+    each side separately: Q of size 3 with P of size 1 is no transformation of
+    (q, p) of sizes 2 and 2, whatever its Jacobian.
+    """
+    image = jax.eval_shape(phase_map, q, p)
+    if not (isinstance(image, tuple) and len(image) == 2):
+        raise ValueError(
+            f"the transform must return a pair (Q, P), got {type(image).__name__}"
+        )
+    for name, old, new in (("Q", q, image[0]), ("P", p, image[1])):
+        old_size = sum(jnp.size(x) for x in jax.tree_util.tree_leaves(old))
+        new_size = sum(math.prod(x.shape) for x in jax.tree_util.tree_leaves(new))
+        if old_size != new_size:
+            partner = "q" if name == "Q" else "p"
+            raise ValueError(
+                f"the transform returns {name} of size {new_size} for {partner} of size "
+                f"{old_size}; a canonical transformation maps (q, p) to (Q, P) with "
+                f"{name} of the same size as {partner}"
+            )
 
 
 # The generator is always called F(old, new, t, args); these name its two sides.
