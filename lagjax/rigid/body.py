@@ -42,7 +42,13 @@ import jax.numpy as jnp
 from lagjax.mechanics.signature import call_with_arity, check_scalar, positional_arity
 from lagjax.system import AbstractSystem
 
-from .quaternion import quaternion_rate, quaternion_to_matrix, skew
+from .inertia import check_moments
+from .quaternion import (
+    check_nonzero_quaternion,
+    quaternion_rate,
+    quaternion_to_matrix,
+    skew,
+)
 
 
 class RigidBody(AbstractSystem):
@@ -70,10 +76,8 @@ class RigidBody(AbstractSystem):
                 "RigidBody needs the three principal moments (shape (3,)), got shape "
                 f"{moments.shape}; diagonalise a full tensor with principal_axes"
             )
-        # A run-time check, so it also holds for traced (vmapped, jitted) moments.
-        self.moments = eqx.error_if(
-            moments, jnp.any(moments <= 0), "principal moments must be positive"
-        )
+        # Concrete moments are checked now; traced (vmapped, jitted) ones at run time.
+        self.moments = check_moments(moments, "RigidBody's principal moments")
         self.potential = potential
         self.potential_arity = (
             0
@@ -185,6 +189,7 @@ class RigidBody(AbstractSystem):
         r"""The state $(q, \mathbf I\boldsymbol\omega)$ from an orientation and a body
         angular velocity; `q` is normalised."""
         quaternion = jnp.asarray(quaternion, dtype=self.moments.dtype)
+        quaternion = check_nonzero_quaternion(quaternion, "the orientation")
         return quaternion / jnp.linalg.norm(quaternion), self.moments * omega_body
 
     # -- AbstractSystem: the state is (quaternion, body momentum) ------------------

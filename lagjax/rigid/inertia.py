@@ -25,11 +25,43 @@ from __future__ import annotations
 
 from typing import Literal
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.core import Tracer
 
 TopKind = Literal["asymmetric", "symmetric", "spherical"]
+
+
+def check_moments(moments: jax.Array, what: str = "principal moments") -> jax.Array:
+    """`moments`, after checking they are finite and positive.
+
+    Concrete values are checked at once (`ValueError` naming them); traced ones
+    (a body built inside `jit`/`vmap`) at run time (`eqx.error_if`). A zero, negative,
+    infinite or NaN moment is no rigid body: ω = Π/I would be infinite, negative
+    kinetic energy possible, or every result NaN.
+    """
+    remedy = "give finite positive moments of inertia, e.g. (1.0, 2.0, 3.0)"
+    if isinstance(moments, Tracer):
+        bad = ~jnp.all(jnp.isfinite(moments) & (moments > 0))
+        return eqx.error_if(
+            moments, bad, f"{what} must be finite and positive: {remedy}"
+        )
+    values = np.asarray(moments)
+    if not np.all(np.isfinite(values)):
+        raise ValueError(f"{what} {values} are not all finite: {remedy}")
+    if not np.all(values > 0):
+        raise ValueError(f"{what} {values} must all be positive: {remedy}")
+    return moments
+
+
+def _check_masses(masses: jax.Array) -> None:
+    if isinstance(masses, Tracer):
+        return
+    values = np.asarray(masses)
+    if not (np.all(np.isfinite(values)) and np.all(values > 0)):
+        raise ValueError(f"point masses must be finite and positive, got {values}")
 
 
 def point_mass_inertia(masses: jax.Array, positions: jax.Array) -> jax.Array:
@@ -51,6 +83,7 @@ def point_mass_inertia(masses: jax.Array, positions: jax.Array) -> jax.Array:
             f"masses must have shape ({positions.shape[0]},) to match positions, "
             f"got {masses.shape}"
         )
+    _check_masses(masses)
     squared_radii = jnp.sum(positions**2, axis=-1)
     isotropic = jnp.sum(masses * squared_radii) * jnp.eye(3, dtype=positions.dtype)
     return isotropic - jnp.einsum("i,ia,ib->ab", masses, positions, positions)
