@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 import lagjax as lj
+from lagjax.phase_space import plot_poincare_section
 from lagjax.special import complete_elliptic_k
 
 OMEGA_X, OMEGA_Y = 1.0, np.sqrt(2.0)
@@ -20,10 +21,17 @@ Y0, PY0 = jnp.array([0.3, 0.7]), jnp.array([0.2, -0.1])
 STATES = (jnp.stack([-AMPLITUDES, Y0], 1), jnp.stack([0 * Y0, PY0], 1))
 
 
+SOLVER = lj.Yoshida4()
+
+
+def plane_x(q, p):
+    return q[0]
+
+
 def _oscillator_section(direction=+1, max_crossings=10):
     return lj.poincare_section(
-        OSCILLATORS, STATES, 40.0, lambda q, p: q[0], direction=direction,
-        dt=0.01, solver=lj.Yoshida4(), max_crossings=max_crossings,
+        OSCILLATORS, STATES, 40.0, plane_x, direction=direction, dt=0.01,
+        solver=SOLVER, max_crossings=max_crossings,
     )  # fmt: skip
 
 
@@ -81,6 +89,20 @@ def test_lagrangian_pendulum_crosses_at_three_quarter_periods():
     np.testing.assert_allclose(
         section.p[0, :count], np.sqrt(2 * (1 - np.cos(theta0))), atol=1e-10
     )
+
+
+def test_plot_draws_every_stored_crossing():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    ax, section = plot_poincare_section(
+        OSCILLATORS, STATES, 40.0, plane_x, dt=0.01, solver=SOLVER,
+        max_crossings=10, horizontal=lambda q, p: q[1], vertical=lambda q, p: p[1],
+    )  # fmt: skip
+    drawn = [np.asarray(collection.get_offsets()) for collection in ax.collections]
+    assert [len(points) for points in drawn] == [7, 7]  # one scatter per orbit
+    np.testing.assert_allclose(drawn[0][:, 0], section.q[0, :7, 1])
+    np.testing.assert_allclose(drawn[1][:, 1], section.p[1, :7, 1])
 
 
 def test_bad_input_is_named():

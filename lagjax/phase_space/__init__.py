@@ -16,6 +16,7 @@ from .indicators import fast_lyapunov_indicator as fast_lyapunov_indicator
 from .indicators import megno as megno
 from .lyapunov import LyapunovSpectrum as LyapunovSpectrum
 from .lyapunov import lyapunov_spectrum as lyapunov_spectrum
+from .plotting import draw_section as draw_section
 from .plotting import plot_poincare_section as plot_poincare_section
 from .sections import PoincareSection as PoincareSection
 from .sections import poincare_section as poincare_section
