@@ -104,6 +104,30 @@ def default_stage_solver() -> StageSolver:
     return StageIteration(rtol=STAGE_TOLERANCE, atol=STAGE_TOLERANCE)
 
 
+def stage_failure_message(solver: diffrax.AbstractSolver) -> str:
+    """What to tell the user when the stage equations of `solver` did not converge.
+
+    The step reports the failure through diffrax's `RESULTS` (whose text is
+    diffrax's own and cannot say why); the run's diagnosis adds this message.
+    """
+    name = type(solver).__name__
+    if isinstance(solver, AbstractGaussLegendre) and isinstance(
+        solver.root_finder, StageIteration
+    ):
+        return (
+            f"The implicit stage equations of {name} did not converge: its default "
+            "fixed-point iteration converges only while dt times the fastest "
+            "frequency of the system is below about 1 (a stiff spring, a fast "
+            f"rotation). Pass {name}(root_finder=optimistix.Newton(rtol=1e-12, "
+            "atol=1e-12)), which converges at any step, or reduce dt."
+        )
+    return (
+        f"The implicit stage equations of {name} did not converge at this step: "
+        "reduce dt, or loosen the root finder's atol (round-off in the residual "
+        "grows like eps·dt·|df/dy|·|y|), or raise root_find_max_steps."
+    )
+
+
 def _matmul(matrix: np.ndarray, x: Array) -> Array:
     """A constant coefficient matrix (rounded to x's dtype) times x, in full precision."""
     return jnp.matmul(
@@ -154,7 +178,15 @@ class AbstractGaussLegendre(diffrax.AbstractImplicitSolver[_SolverState]):
     evaluation of f. The update is added with Kahan compensated summation, the
     compensation carried in the solver state, so round-off does not accumulate as a
     drift. A nonlinear solve that fails (iteration limit, divergence, singular
-    Jacobian) is reported through the step's `RESULTS`, never silently.
+    Jacobian) is reported through the step's `RESULTS`, never silently, and
+    `stage_failure_message` says why and what to change.
+
+    **No automatic fallback** from the fixed-point iteration to Newton: under
+    `vmap` (a sweep) a fallback branch is evaluated for every member whenever one
+    needs it, Newton's Jacobian and LU would be compiled into every step, and a
+    step size at which the fixed-point map stops contracting (dt·ω ≳ 1) is one the
+    user should choose knowingly — it under-resolves the fastest motion. The
+    failure message names the remedy, `root_finder=optimistix.Newton(...)`.
     """
 
     term_structure: ClassVar = diffrax.AbstractTerm
@@ -238,7 +270,9 @@ class GaussLegendre(AbstractGaussLegendre):
       (floored at 45 ε of the state's dtype, ≈ 5e-6 in float32): no
       Jacobian, and measured fastest on the double pendulum (4–5 iterations a step
       at h = 0.01), but it converges only while h·Lip(f) is small — beyond that the
-      step reports failure. For stiff-ish problems pass `optimistix.Newton` (Jacobian
+      step reports failure (the FPU chain at hω = 1.5, say; there is no automatic
+      fallback, see `AbstractGaussLegendre`). For stiff-ish problems pass
+      `optimistix.Newton(rtol=1e-12, atol=1e-12)` (Jacobian
       by autodiff, LU): its stopping test needs the residual below `atol` in absolute
       terms, and round-off in the residual grows like ε·h‖∂f/∂y‖·|y|, so loosen
       `atol` accordingly (≈1e-12 for h‖∂f/∂y‖ ~ 10³). Tolerances must stay near

@@ -8,7 +8,12 @@ evaluations reach round-off, far cheaper than a Newton step with its Jacobian an
 LU factorisation.
 
 It is an optimistix fixed-point solver, used through `optimistix.fixed_point`.
-Two things set it apart from `optimistix.FixedPointIteration`: its state has the
+When the iteration does not contract (h·Lip(f) ≳ 1, a stiff step) it stops at
+the solver's iteration limit and the step reports a failed nonlinear solve;
+`lagjax.solvers.implicit.stage_failure_message` turns that into a message naming
+the remedy, Newton's method (`root_finder=optimistix.Newton(...)`), which
+converges at any step size. Two things set it apart from
+`optimistix.FixedPointIteration`: its state has the
 dtype of the iterate, so float32 stage solves also work when x64 is enabled; and
 its tolerances are floored at what the iterate's dtype can resolve
 (`lagjax.precision.reachable_tolerance`), so the float64 default of 1e-14 becomes
