@@ -43,6 +43,7 @@ from .step_grid import grid_step
 from .system import AbstractSystem
 from .trajectory import Trajectory
 from .validation import check_simulate_inputs
+from .validation import check_simulate_inputs
 
 System = AbstractSystem
 
@@ -157,6 +158,7 @@ def simulate(
       state). With False the trajectory up to the failure is returned and
       `result`/`stats["finite"]` say what happened.
     """
+    y0 = check_simulate_inputs(system, y0, t0, t1, dt, solver, ts, args, max_steps)
     y0 = check_simulate_inputs(system, y0, t0, t1, dt, solver, ts, args, max_steps)
     t0, t1, dt = (_as_python_number(x) for x in (t0, t1, dt))
     _check_times(t0, t1, dt)
