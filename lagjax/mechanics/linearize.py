@@ -276,11 +276,7 @@ def _rigid_body_parts(body, state, t, args, inputs) -> _Parts:
 
 def _parts(system, state, t, args, inputs) -> _Parts:
     from lagjax.rigid.body import RigidBody
-    from lagjax.scenes.base import AbstractScene
 
-    if isinstance(system, AbstractScene):
-        args = system if args is None else args
-        system = system.system()
     if isinstance(system, Lagrangian):
         return _lagrangian_parts(system, state, t, args, inputs)
     if isinstance(system, AbstractHamiltonian):
@@ -321,21 +317,22 @@ def linearize(
     **Returns:** a `LinearizedSystem` (unpacks as `A, B`), with the eigenvalues of
     A and a stability verdict. See the module docstring for each system's state.
     """
-    parts = _parts(system, equilibrium, t, args, inputs)
-    jacobian = jax.jacfwd(parts.field)(parts.state)
+    from lagjax.scenes.base import AbstractScene
+
+    if isinstance(system, AbstractScene):
+        args = system if args is None else args
+        system = system.system()
+    jacobian, rate, parts = _derivatives(system, equilibrium, t, args, inputs)
     if check_equilibrium:
-        remedy = (
-            "Find one first (lj.relative_equilibrium), or pass "
-            "check_equilibrium=False to linearize about this operating point anyway."
-        )
         jacobian = stability.check_stationary(
             jacobian,
-            parts.field(parts.state),
+            rate,
             jnp.linalg.norm(jacobian),
             parts.state,
             tol=equilibrium_tol,
             what="state's rate of change (the residual of the equations of motion)",
-            remedy=remedy,
+            remedy="Find one first (lj.relative_equilibrium), or pass "
+            "check_equilibrium=False to linearize about this operating point anyway.",
         )
         if parts.constraint_residual is not None:
             jacobian = stability.check_stationary(
@@ -347,11 +344,30 @@ def linearize(
                 what="constraint residual (g, ġ, c) (the state is off the manifold)",
                 remedy="Start from a state that satisfies the constraints.",
             )
-    a, b = jacobian, parts.inputs
-    if parts.basis is not None:
-        left = jnp.linalg.pinv(parts.basis)
-        a = left @ a @ parts.basis
+    return _reduce(jacobian, parts.inputs, parts.state, parts.basis)
+
+
+def _no_field(x):
+    raise AssertionError("the field is only used inside _derivatives")
+
+
+# Compiled as a whole: op-by-op dispatch of the nested derivatives costs seconds.
+@eqx.filter_jit
+def _derivatives(system, equilibrium, t, args, inputs):
+    """(∂f/∂x, f) at the operating point, and the system's parts (arrays only)."""
+    parts = _parts(system, equilibrium, t, args, inputs)
+    jacobian = jax.jacfwd(parts.field)(parts.state)
+    arrays = parts._replace(field=_no_field)  # a function cannot leave a jit
+    return jacobian, parts.field(parts.state), arrays
+
+
+@jax.jit
+def _reduce(a, b, state, basis) -> LinearizedSystem:
+    """Onto the chart (constrained systems), then eigenvalues and their stability."""
+    if basis is not None:
+        left = jnp.linalg.pinv(basis)
+        a = left @ a @ basis
         b = None if b is None else left @ b
     eigenvalues = jnp.linalg.eigvals(a)
     codes = stability.classify(eigenvalues, conservative=False)
-    return LinearizedSystem(a, b, eigenvalues, codes, parts.state, parts.basis)
+    return LinearizedSystem(a, b, eigenvalues, codes, state, basis)
