@@ -2,6 +2,7 @@
 
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import lagjax as lj
 from tests.helpers import relative_close
@@ -70,3 +71,53 @@ def test_unstable_equilibrium_reports_growth_rate():
     lag = lj.Lagrangian(lambda th, thd: 0.5 * thd**2 + g * jnp.cos(th))
     omegas, _ = lj.normal_modes(lag, jnp.pi)
     assert relative_close(omegas[0], -np.sqrt(g), 1e-12)
+
+
+def test_modes_are_classified_and_unpack_from_a_result():
+    m, big_m, k = 16.0, 12.0, 3.0
+    result = lj.normal_modes(lj.Lagrangian(co2), jnp.zeros(3), (m, big_m, k))
+    # The free translation is neutral; the two stretches oscillate.
+    assert result.labels() == ("marginal", "stable", "stable")
+    assert result.verdict() == "marginal" and not result.gyroscopic
+    assert np.allclose(result.eigenvalues[1:], 1j * result.omegas[1:], rtol=1e-14)
+    omegas, modes = result
+    assert omegas is result.omegas and modes is result.modes
+
+
+def test_first_order_path_agrees_with_the_closed_form_without_gyroscopic_terms():
+    g, length = 9.81, 0.7
+
+    def L(q, qd):
+        kinetic = length**2 * (
+            qd[0] ** 2 + 0.5 * qd[1] ** 2 + qd[0] * qd[1] * jnp.cos(q[0] - q[1])
+        )
+        return kinetic + g * length * (2 * jnp.cos(q[0]) + jnp.cos(q[1]))
+
+    result = lj.normal_modes(lj.Lagrangian(L), jnp.zeros(2), gyroscopic=True)
+    expected = np.sqrt(np.array([2 - np.sqrt(2), 2 + np.sqrt(2)]) * g / length)
+    assert result.gyroscopic and relative_close(result.omegas, expected, 1e-12)
+    # Without G the complex shapes are real up to the phase fixed by the
+    # normalisation: θ2/θ1 = ±√2 again.
+    ratio = np.asarray(result.modes[1] / result.modes[0])
+    assert relative_close(ratio, [np.sqrt(2), -np.sqrt(2)], 1e-10)
+    assert np.max(np.abs(np.asarray(result.modes).imag)) < 1e-12
+
+
+def test_a_point_that_is_not_an_equilibrium_is_refused():
+    # Tilted pendulum: at θ = 0 the constant force F is unbalanced.
+    g, F = 9.81, 2.5
+    lag = lj.Lagrangian(lambda th, thd: 0.5 * thd**2 + g * jnp.cos(th) + F * th)
+    with pytest.raises(ValueError, match=r"residual generalized force .* \[2\.5\]"):
+        lj.normal_modes(lag, 0.0)
+    # Opting out expands about the point anyway: ω² = g cos 0.
+    omegas, _ = lj.normal_modes(lag, 0.0, check_equilibrium=False)
+    assert relative_close(omegas, np.sqrt(g), 1e-12)
+
+
+def test_constrained_lagrangians_are_pointed_to_linearize():
+    lag = lj.Lagrangian(
+        lambda q, qd: 0.5 * jnp.sum(qd**2) - 9.81 * q[1],
+        constraints=lambda q: jnp.sqrt(q[0] ** 2 + q[1] ** 2) - 1.0,
+    )
+    with pytest.raises(ValueError, match="linearize"):
+        lj.normal_modes(lag, jnp.array([0.0, -1.0]))
