@@ -167,3 +167,25 @@ def test_gyroscopic_terms_are_never_dropped_silently():
     for m, row in zip([0.001, 0.01], np.asarray(frequencies)):
         roots = l4_closed_form(m)[1]
         assert relative_close(row, np.sort(np.abs(roots.imag))[::2], 1e-10)
+
+
+def test_rotating_spherical_pendulum_in_redundant_coordinates():
+    # A bob on a rod of length l, Cartesian (x, y, z) with |r| = l, seen from a frame
+    # turning at Ω about the vertical: gyroscopic and constrained at once. In the
+    # inertial frame the small swings are circles at √(g/l) either way; the frame
+    # sees them at √(g/l) ∓ Ω (the centrifugal −Ω² and the Coriolis term combine).
+    g, length, mass, spin = 9.81, 0.7, 2.0, 0.05
+
+    def L(q, qd):
+        inertial_velocity = qd + jnp.cross(jnp.array([0.0, 0.0, spin]), q)
+        return 0.5 * mass * jnp.sum(inertial_velocity**2) - mass * g * q[2]
+
+    lag = lj.Lagrangian(L, constraints=lambda q: jnp.sqrt(jnp.sum(q**2)) - length)
+    result = lj.normal_modes(lag, jnp.array([0.0, 0.0, -length]))
+    natural = np.sqrt(g / length)
+    assert result.gyroscopic and result.modes.shape == (3, 2)
+    assert relative_close(result.omegas, [natural - spin, natural + spin], 1e-12)
+    # Horizontal circles: no vertical component, |a_x| = |a_y| a quarter apart.
+    shapes = np.asarray(result.modes)
+    assert np.max(np.abs(shapes[2])) < 1e-12
+    assert np.allclose(np.abs(shapes[1] / shapes[0]), 1.0, rtol=1e-12)

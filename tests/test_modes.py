@@ -114,10 +114,26 @@ def test_a_point_that_is_not_an_equilibrium_is_refused():
     assert relative_close(omegas, np.sqrt(g), 1e-12)
 
 
-def test_constrained_lagrangians_are_pointed_to_linearize():
+def test_cartesian_pendulum_modes_live_on_its_rod():
+    # (x, y) with √(x² + y²) = l: one mode, ω = √(g/l), along the circle's tangent.
+    g, length, mass = 9.81, 0.7, 2.0
     lag = lj.Lagrangian(
-        lambda q, qd: 0.5 * jnp.sum(qd**2) - 9.81 * q[1],
-        constraints=lambda q: jnp.sqrt(q[0] ** 2 + q[1] ** 2) - 1.0,
+        lambda q, qd: 0.5 * mass * jnp.sum(qd**2) - mass * g * q[1],
+        constraints=lambda q: jnp.sqrt(q[0] ** 2 + q[1] ** 2) - length,
+    )
+    omegas, modes = lj.normal_modes(lag, jnp.array([0.0, -length]))
+    assert modes.shape == (2, 1)
+    assert relative_close(omegas, np.sqrt(g / length), 1e-12)
+    assert relative_close(np.abs(modes[:, 0]), [mass**-0.5, 0.0], 1e-12)  # aᵀMa = 1
+    # Off the rod is refused, naming the constraint residual.
+    with pytest.raises(ValueError, match="constraint residual"):
+        lj.normal_modes(lag, jnp.array([0.0, -1.1 * length]))
+
+
+def test_velocity_constraints_are_pointed_to_linearize():
+    lag = lj.Lagrangian(
+        lambda q, qd: 0.5 * jnp.sum(qd**2),
+        constraints=lj.Constraints(velocity=lambda q, qd: qd[0] - q[1] * qd[1]),
     )
     with pytest.raises(ValueError, match="linearize"):
-        lj.normal_modes(lag, jnp.array([0.0, -1.0]))
+        lj.normal_modes(lag, jnp.zeros(2))

@@ -63,6 +63,7 @@ import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
 from . import stability
+from .constrained_modes import null_space
 from .constraints import least_correction
 from .hamiltonian import AbstractHamiltonian
 from .lagrangian import Lagrangian
@@ -180,24 +181,6 @@ def _admissible(lag, q0, t, args, mass, rates):
     return jax.vmap(correct, in_axes=1, out_axes=1)(rates)
 
 
-def _null_space(matrix: jax.Array, what: str) -> jax.Array:
-    """Orthonormal basis of ker(matrix), with a run-time full-row-rank check."""
-    rows, columns = matrix.shape
-    if rows == 0:
-        return jnp.eye(columns, dtype=matrix.dtype)
-    _, singular, vh = jnp.linalg.svd(matrix, full_matrices=True)
-    deficient = (
-        singular[-1] <= 64 * columns * jnp.finfo(matrix.dtype).eps * (singular[0])
-    )
-    basis = vh[rows:].T
-    return eqx.error_if(
-        basis,
-        deficient,
-        f"{what} is rank-deficient at the operating point: redundant or degenerate "
-        "constraints leave the constraint manifold undefined there.",
-    )
-
-
 def _constraint_chart(lag, x0, unravel, n, t, args):
     """Tangent basis P of the constraint manifold at x0, and the residual there."""
     constraints = lag.constraints
@@ -210,9 +193,9 @@ def _constraint_chart(lag, x0, unravel, n, t, args):
     def velocity(q_flat, v_flat):
         return constraints.velocity_residual(unravel(q_flat), unravel(v_flat), t, args)
 
-    n_q = _null_space(jax.jacfwd(position)(x0[:n]), "∂g/∂q")
+    n_q = null_space(jax.jacfwd(position)(x0[:n]), "∂g/∂q")
     c_q, c_v = jax.jacfwd(velocity, argnums=(0, 1))(x0[:n], x0[n:])
-    n_v = _null_space(c_v, "∂c/∂q̇")
+    n_v = null_space(c_v, "∂c/∂q̇")
     lift = -jnp.linalg.pinv(c_v) @ c_q @ n_q
     basis = jnp.block(
         [

@@ -40,7 +40,7 @@ Thomson & Tait, *Treatise on Natural Philosophy* §345 (gyroscopic stability).
 from __future__ import annotations
 
 from collections.abc import Iterator
-from typing import Any
+from typing import Any, NamedTuple
 
 import equinox as eqx
 import jax
@@ -50,6 +50,7 @@ import optimistix as optx
 from jax.flatten_util import ravel_pytree
 
 from . import stability
+from .constrained_modes import reduce_to_constraint_surface
 from .lagrangian import Lagrangian
 
 # ‖Ĝ‖ below this fraction of √‖K̂‖ (both in mass-normalised coordinates, 1/time)
@@ -212,22 +213,40 @@ def _gyroscopic_modes(cholesky, stiffness, gyro) -> NormalModes:
     return NormalModes(omegas, modes, lam, codes, gyroscopic=True)
 
 
+class _Expansion(NamedTuple):
+    cholesky: jax.Array
+    potential: jax.Array
+    gyro: jax.Array
+    residual: jax.Array
+    norms: tuple[jax.Array, jax.Array]
+    basis: jax.Array | None
+    surface_residual: jax.Array | None
+
+
 # Compiled as a whole: op-by-op dispatch of the nested derivatives costs seconds.
 @eqx.filter_jit
-def _expansion(lag: Lagrangian, q_eq: Any, args: Any, t: Any):
-    """Cholesky factor of M, K, G, the residual generalized force M q̈(q_eq, 0),
-    and the norms (‖K̂‖, ‖Ĝ‖) of the mass-normalised K and G."""
+def _expansion(lag: Lagrangian, q_eq: Any, args: Any, t: Any) -> _Expansion:
+    """M, K, G at q_eq (reduced to the constraint surface if there is one), the
+    residual generalized force, and the norms of the mass-normalised K and G."""
     q_flat, unravel = ravel_pytree(q_eq)
     kinetic, potential = stiffness_matrices(lag, q_eq, args, t=t)
     gyro = gyroscopic_matrix(lag, q_eq, args, t=t)
-    cholesky = _positive_cholesky(kinetic)
     acceleration = lag.acceleration(q_eq, unravel(jnp.zeros_like(q_flat)), t, args)
     residual = kinetic @ ravel_pytree(acceleration)[0]
+    basis = surface_residual = None
+    if lag.constraints is not None:
+        (kinetic, potential, gyro), basis, surface_residual = (
+            reduce_to_constraint_surface(lag, q_eq, args, t, (kinetic, potential, gyro))
+        )
+        residual = basis.T @ residual  # the normal part is the constraint force
+    cholesky = _positive_cholesky(kinetic)
     norms = (
         jnp.linalg.norm(_congruence(cholesky, potential)),
         jnp.linalg.norm(_congruence(cholesky, gyro)),
     )
-    return cholesky, potential, gyro, residual, norms
+    return _Expansion(
+        cholesky, potential, gyro, residual, norms, basis, surface_residual
+    )
 
 
 def _refuse_unsupported(lag: Lagrangian) -> None:
@@ -239,12 +258,6 @@ def _refuse_unsupported(lag: Lagrangian) -> None:
             "would be ignored. Use lj.linearize(lag, (q_eq, qdot_eq), args) for the "
             "eigenvalues with damping and forcing, or drop force/dissipation for the "
             "undamped modes."
-        )
-    if lag.constraints is not None:
-        raise ValueError(
-            "normal_modes works in independent coordinates, but this Lagrangian has "
-            "constraints, which would be ignored. Use lj.linearize(lag, (q_eq, "
-            "qdot_eq), args): it linearizes on the constraint manifold."
         )
 
 
@@ -302,16 +315,29 @@ def normal_modes(
     conventions: ω ascending, −γ for exponential modes; modes real and
     T-normalised, `modes.T @ T @ modes = I`, without gyroscopic terms).
 
-    Systems with forces, dissipation or constraints are refused with a pointer to
-    `linearize`.
+    Holonomic constraints are honoured: the modes live on the constraint surface
+    (`lagjax.mechanics.constrained_modes`; fewer modes than coordinates, shapes in
+    the full coordinates). Forces, dissipation and velocity constraints are refused
+    with a pointer to `linearize`.
     """
     _refuse_unsupported(lag)
     q_flat = ravel_pytree(q_eq)[0]
-    cholesky, potential, gyro, residual, norms = _expansion(lag, q_eq, args, t)
+    expansion = _expansion(lag, q_eq, args, t)
+    cholesky, potential, gyro = expansion[:3]
+    if check_equilibrium and expansion.surface_residual is not None:
+        cholesky = stability.check_stationary(
+            cholesky,
+            expansion.surface_residual,
+            jnp.asarray(1.0),
+            q_flat,
+            tol=equilibrium_tol,
+            what="constraint residual g(q_eq) (the point is off the surface)",
+            remedy="Start from a point that satisfies the constraints.",
+        )
     if check_equilibrium:
         cholesky = stability.check_stationary(
             cholesky,
-            residual,
+            expansion.residual,
             jnp.linalg.norm(potential),
             q_flat,
             tol=equilibrium_tol,
@@ -320,9 +346,11 @@ def normal_modes(
             "lj.relative_equilibrium), or pass check_equilibrium=False to expand "
             "about this point anyway.",
         )
-    use_first_order, negligible = _choose_gyroscopic(gyroscopic, *norms)
+    use_first_order, negligible = _choose_gyroscopic(gyroscopic, *expansion.norms)
     if use_first_order:
-        return _gyroscopic_modes(cholesky, potential, gyro)
+        return _in_full_coordinates(
+            _gyroscopic_modes(cholesky, potential, gyro), expansion.basis
+        )
     if stability.is_concrete(negligible):
         if not bool(negligible):
             raise ValueError(
@@ -330,4 +358,11 @@ def normal_modes(
             )
     else:
         cholesky = eqx.error_if(cholesky, ~negligible, _GYRO_MESSAGE)
-    return _symmetric_modes(cholesky, potential)
+    return _in_full_coordinates(_symmetric_modes(cholesky, potential), expansion.basis)
+
+
+def _in_full_coordinates(result: NormalModes, basis: jax.Array | None) -> NormalModes:
+    """Mode shapes a = N a_r in the raveled coordinates of q (constrained systems)."""
+    if basis is None:
+        return result
+    return eqx.tree_at(lambda r: r.modes, result, basis @ result.modes)
