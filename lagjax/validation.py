@@ -40,10 +40,12 @@ import jax.numpy as jnp
 import numpy as np
 from jax.core import Tracer
 
+from .mechanics.lagrangian import Lagrangian
 from .rigid.body import RigidBody
 from .rigid.quaternion import check_nonzero_quaternion
 from .scenes.base import AbstractScene
 from .system import AbstractSystem
+from .terms import RattleTerm, RigidBodyTerm
 
 # More steps than this cannot finish in a session (at ~10 ns a step, 10⁹ steps
 # take 10 s for the cheapest system; a typical one takes minutes).
@@ -73,12 +75,16 @@ def check_simulate_inputs(
     """
     check_system(system)
     check_solver(solver)
+    check_solver_fits(_user_system(system), solver)
     check_max_steps(max_steps)
     check_tolerances(rtol, atol)
     check_times(t0, t1, dt)
     check_save_times(ts, t0, t1)
     del args  # a scene's parameters are its fields; nothing to check in args
-    return check_initial_state(_user_system(system), y0)
+    y0 = check_initial_state(_user_system(system), y0)
+    if isinstance(system, AbstractScene):
+        _check_scene_state(system, y0)
+    return y0
 
 
 def _user_system(system: Any) -> Any:
@@ -139,6 +145,28 @@ def check_solver(solver: Any) -> None:
             "by Brownian motion, and lagjax integrates deterministic equations of "
             "motion. Use an ODE solver: diffrax.Tsit5(), diffrax.Dopri8() or a "
             "symplectic lagjax solver"
+        )
+
+
+def check_solver_fits(system: Any, solver: Any) -> None:
+    """Solvers written for one kind of system refuse the others by name."""
+    structure = None if solver is None else solver.term_structure
+    if not isinstance(structure, type):
+        return
+    name, kind = type(solver).__name__, type(system).__name__
+    if issubclass(structure, RigidBodyTerm) and not isinstance(system, RigidBody):
+        raise TypeError(
+            f"{name} is a Lie–Poisson solver for a lagjax.RigidBody (state: unit "
+            f"quaternion and body angular momentum); {kind} is not one. Use a solver "
+            "for generalized coordinates (GaussLegendre, Tsit5, a splitting method "
+            "for separable H); a rigid scene gives its body as scene.rigid_body()"
+        )
+    constrained = isinstance(system, Lagrangian) and system.constraints is not None
+    if issubclass(structure, RattleTerm) and not constrained:
+        raise TypeError(
+            f"{name} integrates a constrained Lagrangian, "
+            f"lagjax.Lagrangian(L, constraints=g); {kind} has no constraints. Use "
+            "StormerVerlet (separable H), GaussLegendre or Tsit5"
         )
 
 
@@ -265,6 +293,19 @@ def check_initial_state(system: AbstractSystem, y0: Any) -> Any:
         _check_partners(system, first, second)
     _check_finite(y0)
     return _floated(y0)
+
+
+def _check_scene_state(scene: AbstractScene, y0: Any) -> None:
+    """A scene knows its state's shapes: those of `scene.initial_state()`."""
+    expected = jax.eval_shape(scene.initial_state)
+    got = jax.tree_util.tree_map(jnp.shape, tuple(y0))
+    want = jax.tree_util.tree_map(lambda x: x.shape, tuple(expected))
+    if got != want:
+        raise ValueError(
+            f"{type(scene).__name__}'s state has shapes {want} (as "
+            f"scene.initial_state() gives), got {got}; start from "
+            "scene.initial_state() and change its values"
+        )
 
 
 def _check_partners(system: AbstractSystem, q: Any, second: Any) -> None:
