@@ -265,3 +265,19 @@ def test_linearize_under_jit_and_vmap():
     rates = np.asarray(jax.vmap(growth)(mus))
     assert abs(rates[0]) < 1e-12  # below Routh's 0.0385
     assert relative_close(rates[1], np.max(l4_closed_form(0.05)[1].real), 1e-10)
+
+
+def test_bad_arguments_name_the_problem():
+    pendulum = lj.Lagrangian(lambda q, qd: 0.5 * qd**2 + G * jnp.cos(q))
+    with pytest.raises(ValueError, match=r"state \(q, qdot\) as a pair"):
+        lj.linearize(pendulum, 0.0)
+    with pytest.raises(ValueError, match=r"input matrix S .* shape \(1, m\)"):
+        lj.linearize(pendulum, (0.0, 0.0), inputs=jnp.eye(2))
+    with pytest.raises(TypeError, match="linearize needs a lagjax"):
+        lj.linearize(lambda q, qd: q, (0.0, 0.0))
+    with pytest.raises(ValueError, match=r"quaternion \(4,\), body_momentum"):
+        lj.linearize(lj.RigidBody(jnp.ones(3)), (jnp.ones(3), jnp.ones(3)))
+    # A constant force on a free particle: no rest point, and the message says so.
+    pushed = lj.Lagrangian(lambda q, qd: 0.5 * qd**2 + 2.0 * q)
+    with pytest.raises(ValueError, match=r"did not converge .* \[2\.\]"):
+        lj.relative_equilibrium(pushed, 0.3)

@@ -76,7 +76,8 @@ class LinearizedSystem(eqx.Module):
     - `eigenvalues` (d,), complex, and `stability` (d,), int (0 stable, 1 marginal,
       2 unstable; see `lagjax.mechanics.stability`); `verdict()` and `labels()` in
       words.
-    - `operating_point` (D,): the flat state linearized about.
+    - `operating_point` (D,): the flat state linearized about (for a rigid body
+      the quaternion and the body momentum, 7 numbers).
     - `basis` (D, d) or None: the chart's directions in the flat state (constrained
       systems; for a rigid body the chart is (ε, δΠ), see the module docstring).
     """
@@ -144,6 +145,8 @@ class _Parts(NamedTuple):
     inputs: jax.Array | None
     basis: jax.Array | None
     constraint_residual: jax.Array | None
+    # The state as the user gave it, flat, when the chart's origin is not it.
+    operating_point: jax.Array | None = None
 
 
 def _lagrangian_parts(lag: Lagrangian, state, t, args, inputs) -> _Parts:
@@ -233,9 +236,19 @@ def _rigid_body_parts(body, state, t, args, inputs) -> _Parts:
         rotation_vector_quaternion,
     )
 
+    if not (isinstance(state, (tuple, list)) and len(state) == 2):
+        raise ValueError(
+            "for a rigid body the equilibrium is the state (quaternion, "
+            f"body_momentum), like simulate's y0; got {type(state).__name__}"
+        )
     quaternion = jnp.asarray(state[0], dtype=body.moments.dtype)
-    quaternion = quaternion / jnp.linalg.norm(quaternion)
     momentum0 = jnp.asarray(state[1], dtype=body.moments.dtype)
+    if quaternion.shape != (4,) or momentum0.shape != (3,):
+        raise ValueError(
+            "for a rigid body the equilibrium is (quaternion (4,), body_momentum "
+            f"(3,)); got shapes {quaternion.shape} and {momentum0.shape}"
+        )
+    quaternion = quaternion / jnp.linalg.norm(quaternion)
     omega0 = body.angular_velocity(momentum0)
 
     def field(x):
@@ -249,12 +262,13 @@ def _rigid_body_parts(body, state, t, args, inputs) -> _Parts:
             [body.angular_velocity(momentum) - frame_rate, momentum_rate]
         )
 
-    x0 = jnp.zeros(6, dtype=body.moments.dtype)
+    x0 = jnp.zeros(6, dtype=body.moments.dtype)  # the chart's origin
     matrix = _input_matrix(inputs, 3, x0.dtype)
     block = (
         None if matrix is None else jnp.concatenate([jnp.zeros_like(matrix), matrix])
     )
-    return _Parts(field, x0, block, None, None)
+    point = jnp.concatenate([quaternion, momentum0])
+    return _Parts(field, x0, block, None, None, point)
 
 
 def _parts(system, state, t, args, inputs) -> _Parts:
@@ -327,7 +341,8 @@ def linearize(
                 what="constraint residual (g, ġ, c) (the state is off the manifold)",
                 remedy="Start from a state that satisfies the constraints.",
             )
-    return _reduce(jacobian, parts.inputs, parts.state, parts.basis)
+    point = parts.state if parts.operating_point is None else parts.operating_point
+    return _reduce(jacobian, parts.inputs, point, parts.basis)
 
 
 def _no_field(x):
