@@ -5,7 +5,13 @@ derives the equations of motion, Legendre transforms, Poisson brackets and norma
 modes by automatic differentiation.
 """
 
+# ruff: noqa: E402  (the XLA default below must run before the other imports)
 from importlib import metadata as _metadata
+
+# Before anything computes: XLA's CPU loop threshold (see lagjax/xla_defaults.py).
+from .xla_defaults import apply_cpu_loop_default as _apply_cpu_loop_default
+
+_apply_cpu_loop_default()
 
 from . import diagnostics as diagnostics
 from . import phase_space as phase_space
@@ -57,11 +63,11 @@ from .shooting import trajectory_between as trajectory_between
 from .simulate import simulate as simulate
 from .solvers.implicit import GaussLegendre as GaussLegendre
 from .solvers.implicit import ImplicitMidpoint as ImplicitMidpoint
-from .solvers.projection import ConstraintProjection as ConstraintProjection
-from .solvers.rattle import Rattle as Rattle
 from .solvers.lie_poisson import QuaternionProjection as QuaternionProjection
 from .solvers.lie_poisson import RigidBodyVerlet as RigidBodyVerlet
 from .solvers.lie_poisson import RigidBodyYoshida4 as RigidBodyYoshida4
+from .solvers.projection import ConstraintProjection as ConstraintProjection
+from .solvers.rattle import Rattle as Rattle
 from .solvers.splitting import BlanesMoan4 as BlanesMoan4
 from .solvers.splitting import KahanLi8 as KahanLi8
 from .solvers.splitting import SofSpa10 as SofSpa10
