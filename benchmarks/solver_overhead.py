@@ -12,7 +12,13 @@ compensated solvers, with the same Kahan-summed increments. Compile time is
 measured separately from run time (median of repeats after a warm-up, the two
 variants run alternately so a busy machine slows both alike).
 
-    python -m benchmarks.solver_overhead [--steps N] [--batch B] [--repeats R]
+With `--saves N` every run saves N + 1 states on the step grid (t = 0 included):
+`simulate` with `ts = linspace(0, T, N + 1)`, diffeqsolve with `SaveAt(ts=...)`, the
+twin with a nested scan. lagjax sets XLA's CPU loop threshold on import
+(`lagjax.xla_defaults`; `LAGJAX_NO_XLA_DEFAULTS=1` opts out): the header says
+whether it is in effect, and it applies to every column alike.
+
+    python -m benchmarks.solver_overhead [--steps N] [--batch B] [--repeats R] [--saves N]
 """
 
 import argparse
@@ -25,9 +31,10 @@ import jax.numpy as jnp
 import numpy as np
 
 import lagjax as lj
-from lagjax.fixed_step import integrate_fixed_steps
+from lagjax.fixed_step import integrate_fixed_steps, integrate_fixed_steps_saving
 from lagjax.solvers.compensated import compensated_add, zero_compensation
 from lagjax.solvers.splitting import StormerVerlet, Yoshida4
+from lagjax.xla_defaults import cpu_loop_default_applied
 
 jax.config.update("jax_enable_x64", True)
 
@@ -46,7 +53,15 @@ KEPLER_TERMS = (
 )
 
 
-def diffrax_final_state(solver, steps, dt):
+def save_times(steps, dt, saves):
+    """`saves` + 1 times on the step grid, t = 0 included (None: final state only)."""
+    return None if saves is None else jnp.linspace(0.0, steps * dt, saves + 1)
+
+
+def diffrax_run(solver, steps, dt, saves=None):
+    ts = save_times(steps, dt, saves)
+    saveat = diffrax.SaveAt(t1=True) if ts is None else diffrax.SaveAt(ts=ts)
+
     def run(q0, p0):
         sol = diffrax.diffeqsolve(
             KEPLER_TERMS,
@@ -55,12 +70,12 @@ def diffrax_final_state(solver, steps, dt):
             steps * dt,
             dt,
             (q0, p0),
-            saveat=diffrax.SaveAt(t1=True),
+            saveat=saveat,
             stepsize_controller=diffrax.ConstantStepSize(),
             max_steps=steps,
         )
         assert sol.ys is not None
-        return sol.ys[0][-1], sol.ys[1][-1]
+        return sol.ys
 
     return run
 
@@ -70,28 +85,39 @@ KEPLER = lj.SeparableHamiltonian(
 )
 
 
-def fixed_step_final_state(solver, steps, dt):
+def fixed_step_run(solver, steps, dt, saves=None):
     """lagjax's fixed-step scan path with the hand-written terms: loop overhead only."""
 
     def run(q0, p0):
-        (q, p), _, _ = integrate_fixed_steps(
-            KEPLER_TERMS, solver, 0.0, steps * dt, dt, (q0, p0), None
-        )
-        return q, p
+        if saves is None:
+            y, _, _ = integrate_fixed_steps(
+                KEPLER_TERMS, solver, 0.0, steps * dt, dt, (q0, p0), None
+            )
+        else:
+            grid = (0, steps // saves, saves + 1)
+            y, _, _ = integrate_fixed_steps_saving(
+                KEPLER_TERMS, solver, 0.0, dt, grid, (q0, p0), None
+            )
+        return y
 
     return run
 
 
-def simulate_final_state(solver, steps, dt):
+def simulate_run(solver, steps, dt, saves=None):
+    ts = save_times(steps, dt, saves)
+
     def run(q0, p0):
-        trajectory = lj.simulate(KEPLER, (q0, p0), t1=steps * dt, dt=dt, solver=solver)
-        return trajectory.q[-1], trajectory.p[-1]
+        trajectory = lj.simulate(
+            KEPLER, (q0, p0), t1=steps * dt, dt=dt, solver=solver, ts=ts
+        )
+        return trajectory.ys
 
     return run
 
 
-def scan_final_state(solver, steps, dt):
-    """The hand-written twin: kick, (drift, kick)… with the force carried over.
+def scan_run(solver, steps, dt, saves=None):
+    """The hand-written twin: kick, (drift, kick)… with the force carried over;
+    with `saves`, a nested scan that saves (q, p) every `steps // saves` steps.
 
     For a compensated solver the twin is compensated too (same method): it sums
     the step's increments and adds them to the state with Kahan's sum.
@@ -122,14 +148,22 @@ def scan_final_state(solver, steps, dt):
         (q, p), compensation = compensated_add((q, p), (dq, dp), compensation)
         return (q, p, force, compensation), None
 
+    step = compensated_step if solver.compensated else plain_step
+
     def run(q0, p0):
+        start = (q0, p0, kepler_force(q0))
         if solver.compensated:
-            start = (q0, p0, kepler_force(q0), zero_compensation((q0, p0)))
-            (q, p, *_), _ = jax.lax.scan(compensated_step, start, None, length=steps)
-        else:
-            start = (q0, p0, kepler_force(q0))
-            (q, p, _), _ = jax.lax.scan(plain_step, start, None, length=steps)
-        return q, p
+            start = (*start, zero_compensation((q0, p0)))
+        if saves is None:
+            (q, p, *_), _ = jax.lax.scan(step, start, None, length=steps)
+            return q, p
+
+        def interval(carry, _):
+            carry, _ = jax.lax.scan(step, carry, None, length=steps // saves)
+            return carry, carry[:2]
+
+        _, (qs, ps) = jax.lax.scan(interval, start, None, length=saves)
+        return jnp.concatenate([q0[None], qs]), jnp.concatenate([p0[None], ps])
 
     return run
 
@@ -157,7 +191,7 @@ def initial_states(batch):
     return q0, p0
 
 
-def compare(solver, steps, batch, repeats):
+def compare(solver, steps, batch, repeats, saves=None):
     """{name: (compile seconds, median run seconds)} for diffrax and the scan twin.
 
     The two are run alternately, so a busy machine slows both alike.
@@ -166,13 +200,13 @@ def compare(solver, steps, batch, repeats):
     arguments = initial_states(batch)
     compiled, compile_seconds = {}, {}
     makers = (
-        ("simulate", simulate_final_state),
-        ("fixed", fixed_step_final_state),
-        ("diffrax", diffrax_final_state),
-        ("scan", scan_final_state),
+        ("simulate", simulate_run),
+        ("fixed", fixed_step_run),
+        ("diffrax", diffrax_run),
+        ("scan", scan_run),
     )
     for name, make in makers:
-        function = make(solver, steps, dt)
+        function = make(solver, steps, dt, saves)
         if batch is not None:
             function = jax.vmap(function)
         compiled[name], compile_seconds[name] = compile_timed(function, arguments)
@@ -192,14 +226,26 @@ def main():
     parser.add_argument("--steps", type=int, default=100_000)
     parser.add_argument("--batch", type=int, default=1024)
     parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument(
+        "--saves",
+        type=int,
+        default=None,
+        help="save this many states on the step grid (default: final state only)",
+    )
     options = parser.parse_args()
+    if options.saves is not None and options.steps % options.saves:
+        parser.error("--steps must be a multiple of --saves")
     solvers = {
         "StormerVerlet": StormerVerlet(),
         "StormerVerlet(compensated=False)": StormerVerlet(compensated=False),
         "Yoshida4": Yoshida4(),
         "Yoshida4(compensated=False)": Yoshida4(compensated=False),
     }
-    print(f"{options.steps} steps, Kepler e = 0.6, device {jax.devices()[0]}")
+    saving = "final state" if options.saves is None else f"{options.saves} saves"
+    print(
+        f"{options.steps} steps, {saving}, Kepler e = 0.6, device {jax.devices()[0]}, "
+        f"lagjax CPU loop default {cpu_loop_default_applied()}"
+    )
     header = f"{'solver':34s} {'batch':>6s} {'compile sim/dfx/scan [s]':>25s}"
     print(
         f"{header} {'simulate':>10s} {'diffeqsolve':>12s} {'scan':>10s} "
@@ -207,7 +253,7 @@ def main():
     )
     for batch in (None, options.batch):
         for label, solver in solvers.items():
-            rows = compare(solver, options.steps, batch, options.repeats)
+            rows = compare(solver, options.steps, batch, options.repeats, options.saves)
             (c_sim, r_sim), (c_d, r_d), (c_s, r_s) = (
                 rows["simulate"],
                 rows["diffrax"],

@@ -5,8 +5,10 @@ the previous and next times, the step-size controller's state, dense output and
 save state, and selects accepted/rejected values every step. For a fixed step with
 only the final state saved none of that is needed, and on CPU it is what separates
 a diffrax run from a hand-written loop (measured in `benchmarks/solver_overhead.py`).
-`simulate` therefore takes this path for `dt` given, final state only, default
-adjoint and no progress meter. The solver and its `step` are the same diffrax
+`simulate` therefore takes this path for `dt` given, default adjoint and no
+progress meter, when only the final state is saved or the save times lie on the
+step grid at a uniform spacing (`ts = linspace` over multiples of dt, every k-th
+step): then two nested scans save without interpolation. The solver and its `step` are the same diffrax
 objects, so results match `diffeqsolve` with `ConstantStepSize` (including the
 shortened last step) to round-off.
 """
@@ -20,6 +22,7 @@ import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 
 def fixed_step_count(t0: float, t1: float, dt: float) -> int:
@@ -33,6 +36,41 @@ def fixed_step_count(t0: float, t1: float, dt: float) -> int:
     if nearest >= 1 and abs(ratio - nearest) <= 1e-9 * ratio:
         return nearest
     return max(1, math.ceil(ratio))
+
+
+def _step_function(terms, solver, t0, dt, args, dtype, last_step=None, t1=None):
+    """The scan body of one fixed step k → k + 1, carrying (y, state, result, k).
+
+    Times are formed from the step index (t0 + k·dt), not accumulated, so every
+    step has the same h to the last bit on an exact grid (`step_grid`). The step
+    index is carried, not scanned over: with `xs = arange(steps)` XLA on CPU
+    launched the fused pieces of a larger step body one by one (measured 10× on
+    Kepler with Yoshida4, 2× on a rigid body; bit-identical results). When
+    `last_step` is given, that step ends exactly at `t1` (a shortened last step).
+    """
+
+    def one_step(carry, _):
+        y, solver_state, result, k = carry
+        start = (t0 + k * dt).astype(dtype)
+        end = t0 + (k + 1) * dt
+        if last_step is not None:
+            end = jnp.where(k == last_step, t1, end)
+        y, _, _, solver_state, step_result = solver.step(
+            terms, start, end.astype(dtype), y, args, solver_state, False
+        )
+        result = diffrax.RESULTS.where(
+            result == diffrax.RESULTS.successful, step_result, result
+        )
+        return (y, solver_state, result, k + 1), None
+
+    return one_step
+
+
+def _initial_carry(terms, solver, t0, dt, y0, args, dtype):
+    state = solver.init(
+        terms, jnp.asarray(t0, dtype), jnp.asarray(t0 + dt, dtype), y0, args
+    )
+    return (y0, state, diffrax.RESULTS.successful, jnp.asarray(0))
 
 
 # Compiled once per (terms, solver, times, state structure): terms and solvers are
@@ -58,25 +96,66 @@ def integrate_fixed_steps(
     """
     steps = fixed_step_count(t0, t1, dt)
     dt = math.copysign(abs(dt), t1 - t0)
-    state = solver.init(
-        terms, jnp.asarray(t0, dtype), jnp.asarray(t0 + dt, dtype), y0, args
-    )
-
-    # The step index is carried, not scanned over: with `xs = arange(steps)` XLA on
-    # CPU launched the fused pieces of a larger step body one by one (measured
-    # 10× on Kepler with Yoshida4, 2× on a rigid body; bit-identical results).
-    def one_step(carry, _):
-        y, solver_state, result, k = carry
-        start = (t0 + k * dt).astype(dtype)
-        end = jnp.where(k == steps - 1, t1, t0 + (k + 1) * dt).astype(dtype)
-        y, _, _, solver_state, step_result = solver.step(
-            terms, start, end, y, args, solver_state, False
-        )
-        result = diffrax.RESULTS.where(
-            result == diffrax.RESULTS.successful, step_result, result
-        )
-        return (y, solver_state, result, k + 1), None
-
-    initial = (y0, state, diffrax.RESULTS.successful, jnp.asarray(0))
+    one_step = _step_function(terms, solver, t0, dt, args, dtype, steps - 1, t1)
+    initial = _initial_carry(terms, solver, t0, dt, y0, args, dtype)
     (y1, _, result, _), _ = jax.lax.scan(one_step, initial, None, length=steps)
     return y1, result, steps
+
+
+def uniform_grid_saves(
+    t0: float, dt: float, ts: np.ndarray
+) -> tuple[int, int, int] | None:
+    """`(lead, every, saves)` when the save times are t0 + (lead + j·every)·dt for
+    j = 0 … saves − 1 (to 1e-9 of a step), else None.
+
+    These are the runs a nested scan saves without interpolation: `lead` steps to
+    the first save, then `every` steps between saves.
+    """
+    if ts.ndim != 1 or ts.size == 0 or not np.all(np.isfinite(ts)):
+        return None
+    positions = (ts - t0) / dt
+    indices = np.round(positions)
+    if np.any(np.abs(positions - indices) > 1e-9 * np.maximum(1.0, np.abs(indices))):
+        return None
+    if indices[0] < 0:
+        return None
+    gaps = np.diff(indices)
+    if gaps.size and (gaps[0] < 1 or np.any(gaps != gaps[0])):
+        return None
+    every = int(gaps[0]) if gaps.size else 1
+    return int(indices[0]), every, int(ts.size)
+
+
+@eqx.filter_jit
+def integrate_fixed_steps_saving(
+    terms: Any,
+    solver: diffrax.AbstractSolver,
+    t0: float,
+    dt: float,
+    grid: tuple[int, int, int],
+    y0: Any,
+    args: Any,
+    dtype: Any = float,
+) -> tuple[Any, Any, int]:
+    """Fixed steps with the state saved on the step grid: `(ys, result, steps)`.
+
+    `grid = (lead, every, saves)` from `uniform_grid_saves`: `lead` steps, a save,
+    then `saves − 1` times `every` steps and a save. Two nested `lax.scan`s, so the
+    saving costs one copy per save and nothing per step.
+    """
+    lead, every, saves = grid
+    one_step = _step_function(terms, solver, t0, dt, args, dtype)
+    carry = _initial_carry(terms, solver, t0, dt, y0, args, dtype)
+    if lead:
+        carry, _ = jax.lax.scan(one_step, carry, None, length=lead)
+    first = carry[0]
+
+    def interval(carry, _):
+        carry, _ = jax.lax.scan(one_step, carry, None, length=every)
+        return carry, carry[0]
+
+    carry, later = jax.lax.scan(interval, carry, None, length=saves - 1)
+    ys = jax.tree_util.tree_map(
+        lambda a, b: jnp.concatenate([jnp.asarray(a)[None], b]), first, later
+    )
+    return ys, carry[2], lead + every * (saves - 1)

@@ -18,9 +18,9 @@ Which terms and state each system gets for a solver is the system's own answer
 (lagjax's splitting methods and diffrax's `SemiImplicitEuler`). With `dt` the steps are
 fixed; without it the solver must be adaptive and `rtol`/`atol` control the error.
 Only the final state is saved unless `ts` (or `saveat`) asks for more. Fixed steps
-with only the final state saved (and the default adjoint) run as a plain `lax.scan`
-over the solver's `step` (see `fixed_step.py`); everything else runs through
-`diffrax.diffeqsolve`.
+with only the final state saved, or `ts` on a uniform subgrid of the steps (and the
+default adjoint), run as plain `lax.scan`s over the solver's `step` (see
+`fixed_step.py`); everything else runs through `diffrax.diffeqsolve`.
 """
 
 from __future__ import annotations
@@ -36,13 +36,17 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from .fixed_step import integrate_fixed_steps
+from .fixed_step import (
+    fixed_step_count,
+    integrate_fixed_steps,
+    integrate_fixed_steps_saving,
+    uniform_grid_saves,
+)
 from .flat_state import flattened
 from .precision import cast_floats, working_dtype
 from .step_grid import grid_step
 from .system import AbstractSystem
 from .trajectory import Trajectory
-from .validation import check_simulate_inputs
 from .validation import check_simulate_inputs
 
 System = AbstractSystem
@@ -159,7 +163,6 @@ def simulate(
       `result`/`stats["finite"]` say what happened.
     """
     y0 = check_simulate_inputs(system, y0, t0, t1, dt, solver, ts, args, max_steps)
-    y0 = check_simulate_inputs(system, y0, t0, t1, dt, solver, ts, args, max_steps)
     t0, t1, dt = (_as_python_number(x) for x in (t0, t1, dt))
     _check_times(t0, t1, dt)
     if not isinstance(system, AbstractSystem):
@@ -247,28 +250,51 @@ class _Run(NamedTuple):
     dtype: Any
 
     def fits_scan(self) -> bool:
-        """Fixed steps, final state only, default adjoint: the plain-scan path."""
-        return (
+        """Fixed steps, default adjoint, no progress meter, and only the final state
+        or states on a uniform subgrid of the steps saved: the plain-scan path."""
+        plain = (
             self.dt is not None
-            and self.ts is None
             and self.saveat is None
             and self.adjoint is None
             and not self.progress
             and self.max_steps is None
             and all(isinstance(x, (int, float)) for x in (self.t0, self.t1, self.dt))
         )
+        return plain and (self.ts is None or self.save_grid() is not None)
+
+    def save_grid(self) -> tuple[int, int, int] | None:
+        """`(lead, every, saves)` of `ts` on the step grid within [t0, t1], or None
+        (traced `ts`, off the grid, or unevenly spaced)."""
+        try:
+            ts = np.asarray(self.ts, dtype=float)
+        except jax.errors.TracerArrayConversionError:
+            return None
+        grid = uniform_grid_saves(self.t0, self.dt, ts)
+        if grid is None:
+            return None
+        lead, every, saves = grid
+        if lead + every * (saves - 1) > fixed_step_count(self.t0, self.t1, self.dt):
+            return None
+        return grid
 
 
 def _integrate_scan(terms, solver, state0, args, run: _Run):
-    """The fixed-step path: a `lax.scan` over the solver's step (`fixed_step.py`)."""
+    """The fixed-step path: `lax.scan`s over the solver's step (`fixed_step.py`)."""
     step = grid_step(run.t0, run.t1, run.dt, run.dtype)
-    y1, result, steps = integrate_fixed_steps(
-        terms, solver, run.t0, run.t1, step, state0, args, run.dtype
-    )
+    if run.ts is None:
+        y1, result, steps = integrate_fixed_steps(
+            terms, solver, run.t0, run.t1, step, state0, args, run.dtype
+        )
+        saved_ts = jnp.asarray([run.t1], dtype=run.dtype)
+        ys = jax.tree_util.tree_map(lambda x: jnp.asarray(x)[None], y1)
+    else:
+        step = math.copysign(abs(step), run.t1 - run.t0)
+        ys, result, steps = integrate_fixed_steps_saving(
+            terms, solver, run.t0, step, run.save_grid(), state0, args, run.dtype
+        )
+        saved_ts = run.ts
     if run.throw:
-        y1 = result.error_if(y1, result != diffrax.RESULTS.successful)
-    saved_ts = jnp.asarray([run.t1], dtype=run.dtype)
-    ys = jax.tree_util.tree_map(lambda x: jnp.asarray(x)[None], y1)
+        ys = result.error_if(ys, result != diffrax.RESULTS.successful)
     counts = jnp.asarray(steps)
     stats = dict(
         num_steps=counts, num_accepted_steps=counts, num_rejected_steps=0 * counts
