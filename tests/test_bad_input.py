@@ -42,17 +42,27 @@ def test_function_with_too_few_arguments():
         lj.Lagrangian(lambda q: q**2)
 
 
-def test_degenerate_lagrangian_inside_jit_raises():
-    # L linear in q̇: the mass matrix vanishes and q̈ is undetermined.
+def test_degenerate_lagrangian_raises_eagerly_and_poisons_under_jit():
+    # L linear in q̇: the mass matrix vanishes and q̈ is undetermined. Called on
+    # values: a clear error. Traced (inside jit or a loop): NaN, which costs no
+    # branch in the fused step; check=True raises there too.
     lag = lj.Lagrangian(lambda q, qd: jnp.sum(q * qd) - jnp.sum(q**2))
     with pytest.raises(Exception, match="singular"):
-        jax.block_until_ready(jax.jit(lag.acceleration)(jnp.ones(2), jnp.ones(2)))
+        jax.block_until_ready(lag.acceleration(jnp.ones(2), jnp.ones(2)))
+    traced = jax.jit(lag.acceleration)(jnp.ones(2), jnp.ones(2))
+    assert bool(jnp.all(jnp.isnan(traced)))
+    checked = jax.jit(lambda q, qd: lag.acceleration(q, qd, check=True))
+    with pytest.raises(Exception, match="singular"):
+        jax.block_until_ready(checked(jnp.ones(2), jnp.ones(2)))
 
 
 def test_degenerate_lagrangian_dense_path_raises():
     lag = lj.Lagrangian(lambda q, qd: jnp.sum(q[1:] * qd[1:]) + 0.5 * qd[0] ** 2)
     with pytest.raises(Exception, match="singular"):
-        jax.block_until_ready(jax.jit(lag.acceleration)(jnp.ones(9), jnp.ones(9)))
+        jax.block_until_ready(lag.acceleration(jnp.ones(9), jnp.ones(9)))
+    checked = jax.jit(lambda q, qd: lag.acceleration(q, qd, check=True))
+    with pytest.raises(Exception, match="singular"):
+        jax.block_until_ready(checked(jnp.ones(9), jnp.ones(9)))
 
 
 def test_unchecked_acceleration_is_not_finite():

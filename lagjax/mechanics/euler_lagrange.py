@@ -97,10 +97,10 @@ def _dense_system(lag_flat: FlatLagrangian, q, v, t):
     return mass, force - transport
 
 
-def _solve_scalar(mass, rhs) -> tuple[jax.Array, jax.Array]:
+def _solve_scalar(mass, rhs, poison: bool) -> tuple[jax.Array, jax.Array]:
     n = len(rhs)
     if n <= UNROLLED_SOLVE_LIMIT:
-        x, singular = solve_unrolled(mass, rhs)
+        x, singular = solve_unrolled(mass, rhs, poison=poison)
         return jnp.stack(x), singular
     full = [[mass[min(i, j)][max(i, j)] for j in range(n)] for i in range(n)]
     return solve_dense(jnp.stack([jnp.stack(row) for row in full]), jnp.stack(rhs))
@@ -117,7 +117,7 @@ def euler_lagrange_acceleration(
     args: Any,
     generalized_force: Any = None,
     *,
-    check: bool = True,
+    check: bool | str = True,
 ) -> Any:
     """q̈ from the Euler–Lagrange equations.
 
@@ -128,12 +128,16 @@ def euler_lagrange_acceleration(
       generalized force Q (already including −∂D/∂q̇).
 
     - `check`: with True, a numerically singular mass matrix raises a run-time
-      error (`eqx.error_if`, works inside jit). With False no conditioning test is
-      made — an exactly singular matrix still gives inf/NaN, never a finite wrong
-      number, but a nearly singular one is not flagged. The test costs a branch (or
-      a select) per call, which splits an otherwise fused integration step
-      (≈2.9× single / 1.2× batched on CPU, see the benchmark); integration loops
-      use False and check their result once (`simulate` does).
+      error (`eqx.error_if`, works inside jit). That test is a branch per call,
+      which splits an otherwise fused integration step (2.3–4.8× single, 1.2–1.8×
+      batched on CPU, `benchmarks/derivation_overhead.py`). With `"nan"` a singular
+      matrix turns q̈ into NaN instead — one select, which fuses — so a loop
+      carries the verdict to its end, where the caller checks the state once
+      (`simulate` does, naming the singular mass matrix as a likely cause). With
+      False no conditioning test is made — an exactly singular matrix still gives
+      inf/NaN, never a finite wrong number, but a nearly singular one is not
+      flagged. `Lagrangian.acceleration` picks True for concrete inputs and
+      `"nan"` under a trace.
 
     **Returns:** q̈ with the structure of `q`.
     """
@@ -149,12 +153,14 @@ def euler_lagrange_acceleration(
         mass, rhs = _scalar_system(lag_flat, q_flat, v_flat, t)
         if force is not None:
             rhs = [r + force[i] for i, r in enumerate(rhs)]
-        qddot, singular = _solve_scalar(mass, rhs)
+        qddot, singular = _solve_scalar(mass, rhs, poison=check == "nan")
     else:
         mass, rhs_array = _dense_system(lag_flat, q_flat, v_flat, t)
         if force is not None:
             rhs_array = rhs_array + force
         qddot, singular = solve_dense(mass, rhs_array)
-    if check:
+    if check == "nan":
+        qddot = jnp.where(singular, jnp.nan, qddot)
+    elif check:
         qddot = raise_if_singular(qddot, singular, "The mass matrix ∂²L/∂q̇∂q̇")
     return unravel(qddot)

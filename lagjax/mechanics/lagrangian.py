@@ -38,6 +38,13 @@ if TYPE_CHECKING:
     from .hamiltonian import LegendreHamiltonian
 
 
+def _any_traced(*trees: Any) -> bool:
+    """Whether any leaf is a JAX tracer (the call is being traced, not run)."""
+    return any(
+        isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(trees)
+    )
+
+
 class Lagrangian(AbstractSystem):
     r"""A mechanical system given by its Lagrangian $L(q, \dot q, t)$.
 
@@ -132,15 +139,28 @@ class Lagrangian(AbstractSystem):
         return check_scalar(value, "the dissipation function D")
 
     def acceleration(
-        self, q: Any, qdot: Any, t: Any = 0.0, args: Any = None, *, check: bool = True
+        self,
+        q: Any,
+        qdot: Any,
+        t: Any = 0.0,
+        args: Any = None,
+        *,
+        check: bool | str | None = None,
     ) -> Any:
         """q̈ from the Euler–Lagrange equations (see `euler_lagrange_acceleration`).
 
-        A singular mass matrix raises a run-time error. `check=False` skips that
-        test (an exactly singular matrix then gives inf/NaN); it is the cheaper form
-        for integration loops that check their result, as `simulate` does.
+        A singular mass matrix is never a finite wrong number. By default (`check`
+        None) a call on concrete values raises a clear error, and a call under a
+        trace — inside `jit`, `vmap` or an integration loop — returns NaN instead,
+        a test that costs one fused select rather than a branch that splits the
+        step (hand-written speed; `benchmarks/derivation_overhead.py`); check the
+        loop's result once, as `simulate` does. `check=True` raises also under
+        `jit` (`eqx.error_if`, at a branch per call), `"nan"` always poisons,
+        `False` skips the test (an exactly singular matrix still gives inf/NaN).
         """
         check_same_structure(q, qdot, "q", "qdot")
+        if check is None:
+            check = "nan" if _any_traced(q, qdot, t) else True
         self(q, qdot, t, args)  # trace-time checks of L's output; no run-time cost
         free = euler_lagrange_acceleration(
             self._call_unchecked,
@@ -153,7 +173,7 @@ class Lagrangian(AbstractSystem):
         )
         if self.constraints is None:
             return free
-        return constrained_motion(self, q, qdot, t, args, free, check=check)[0]
+        return constrained_motion(self, q, qdot, t, args, free, check=bool(check))[0]
 
     def multipliers(
         self, q: Any, qdot: Any, t: Any = 0.0, args: Any = None
