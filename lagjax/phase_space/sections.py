@@ -35,6 +35,7 @@ from jax.flatten_util import ravel_pytree
 from .flow import PhaseFlow, interval_count, phase_flow
 
 _HENON_SUBSTEPS = 4
+_CHUNK = 64  # steps between two writes of the crossing buffers
 
 
 class PoincareSection(eqx.Module):
@@ -64,22 +65,36 @@ def _crossed(before: jax.Array, after: jax.Array, direction: int) -> jax.Array:
 
 
 def _scan_for_crossings(flow, level, flat0, steps, dt, direction, max_crossings):
-    """The step index, end states and surface values of the first crossing steps."""
+    """The step index, end states and surface values of the first crossing steps.
 
-    def advance(carry, index):
-        y, before, count, indices, ends, values = carry
+    The orbit is stepped in chunks of up to `_CHUNK` steps; the crossings of a chunk
+    are written into the buffers by one scatter per chunk (a scatter every step
+    would dominate the cost of a batch of orbits).
+    """
+
+    def step(carry, _):
+        y, before = carry
         moved = flow.advance(y, dt)
         after = level(moved)
-        hit = _crossed(before, after, direction)
-        slot = jnp.minimum(count, max_crossings - 1)
-        keep = hit & (count < max_crossings)
-        indices = indices.at[slot].set(jnp.where(keep, index, indices[slot]))
-        pair, pair_values = jnp.stack([y, moved]), jnp.stack([before, after])
-        ends = ends.at[slot].set(jnp.where(keep, pair, ends[slot]))
-        values = values.at[slot].set(jnp.where(keep, pair_values, values[slot]))
-        return (moved, after, count + hit, indices, ends, values), None
+        return (moved, after), (y, moved, before, after)
 
-    start = (
+    def chunk(carry, first_index, length):
+        y, before, count, indices, ends, values = carry
+        (y, before), (starts, stops, befores, afters) = jax.lax.scan(
+            step, (y, before), None, length=length
+        )
+        hits = _crossed(befores, afters, direction)
+        slots = count + jnp.cumsum(hits) - 1
+        # Misses and overflow go to slot max_crossings, which the scatter drops.
+        slots = jnp.where(hits & (slots < max_crossings), slots, max_crossings)
+        step_indices = first_index + jnp.arange(length, dtype=jnp.int32)
+        indices = indices.at[slots].set(step_indices, mode="drop")
+        ends = ends.at[slots].set(jnp.stack([starts, stops], axis=1), mode="drop")
+        values = values.at[slots].set(jnp.stack([befores, afters], axis=1), mode="drop")
+        count = count + jnp.sum(hits, dtype=count.dtype)
+        return (y, before, count, indices, ends, values)
+
+    carry = (
         flat0,
         level(flat0),
         jnp.zeros((), dtype=jnp.int32),
@@ -87,7 +102,16 @@ def _scan_for_crossings(flow, level, flat0, steps, dt, direction, max_crossings)
         jnp.zeros((max_crossings, 2, flat0.shape[0]), dtype=flat0.dtype),
         jnp.ones((max_crossings, 2), dtype=flat0.dtype),
     )
-    carry, _ = jax.lax.scan(advance, start, jnp.arange(steps, dtype=jnp.int32))
+    length = min(_CHUNK, steps)
+    whole, remainder = divmod(steps, length)
+
+    def full_chunk(carry, first_index):
+        return chunk(carry, first_index, length), None
+
+    firsts = length * jnp.arange(whole, dtype=jnp.int32)
+    carry, _ = jax.lax.scan(full_chunk, carry, firsts)
+    if remainder:
+        carry = chunk(carry, jnp.asarray(whole * length, jnp.int32), remainder)
     return carry[2:]
 
 
