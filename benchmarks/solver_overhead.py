@@ -95,7 +95,7 @@ def fixed_step_run(solver, steps, dt, saves=None):
             )
         else:
             grid = (0, steps // saves, saves + 1)
-            y, _, _ = integrate_fixed_steps_saving(
+            y, *_ = integrate_fixed_steps_saving(
                 KEPLER_TERMS, solver, 0.0, dt, grid, (q0, p0), None
             )
         return y

@@ -47,6 +47,13 @@ def _step_function(terms, solver, t0, dt, args, dtype, last_step=None, t1=None):
     launched the fused pieces of a larger step body one by one (measured 10× on
     Kepler with Yoshida4, 2× on a rigid body; bit-identical results). When
     `last_step` is given, that step ends exactly at `t1` (a shortened last step).
+
+    A failed step (the solver's own `RESULTS`, or a non-finite state:
+    `RESULTS.nonfinite`) is not taken: the state and the step index stay at the
+    last good step for the rest of the scan, so a failed run returns what it
+    computed up to the failure and where it stopped. Detection is cheap — one
+    sum of the state and two selects per step, inside the fused step
+    (`benchmarks/solver_overhead.py` measures the loop with it).
     """
 
     def one_step(carry, _):
@@ -55,15 +62,28 @@ def _step_function(terms, solver, t0, dt, args, dtype, last_step=None, t1=None):
         end = t0 + (k + 1) * dt
         if last_step is not None:
             end = jnp.where(k == last_step, t1, end)
-        y, _, _, solver_state, step_result = solver.step(
+        y_next, _, _, solver_state, step_result = solver.step(
             terms, start, end.astype(dtype), y, args, solver_state, False
+        )
+        step_result = diffrax.RESULTS.where(
+            _is_finite(y_next), step_result, diffrax.RESULTS.nonfinite
         )
         result = diffrax.RESULTS.where(
             result == diffrax.RESULTS.successful, step_result, result
         )
-        return (y, solver_state, result, k + 1), None
+        failed = result != diffrax.RESULTS.successful
+        y = jax.tree_util.tree_map(
+            lambda new, old: jnp.where(failed, old, new), y_next, y
+        )
+        return (y, solver_state, result, jnp.where(failed, k, k + 1)), None
 
     return one_step
+
+
+def _is_finite(state: Any) -> jax.Array:
+    """Whether every entry of `state` is finite: one sum (inf and NaN propagate)."""
+    total = sum(jnp.sum(leaf) for leaf in jax.tree_util.tree_leaves(state))
+    return jnp.isfinite(total)
 
 
 def _initial_carry(terms, solver, t0, dt, y0, args, dtype):
@@ -86,20 +106,20 @@ def integrate_fixed_steps(
     args: Any,
     dtype: Any = float,
 ) -> tuple[Any, Any, int]:
-    """Take fixed steps from t0 to t1; return `(y1, result, steps)`.
+    """Take fixed steps from t0 to t1; return `(y1, result, steps_taken)`.
 
     `result` is the first unsuccessful diffrax `RESULTS` of any step (e.g. a failed
-    implicit solve), or `successful`. Grid times t0 + k·dt are formed in the default
-    float precision and handed to the solver in the state's `dtype`. Steps after a
-    failure still run — the scan has a fixed length — but the state reported then
-    is that of a failed run.
+    implicit solve, or `nonfinite`), or `successful`. Grid times t0 + k·dt are
+    formed in the default float precision and handed to the solver in the state's
+    `dtype`. After a failure `y1` is the state of the last good step and
+    `steps_taken` counts the steps up to it.
     """
     steps = fixed_step_count(t0, t1, dt)
     dt = math.copysign(abs(dt), t1 - t0)
     one_step = _step_function(terms, solver, t0, dt, args, dtype, steps - 1, t1)
     initial = _initial_carry(terms, solver, t0, dt, y0, args, dtype)
-    (y1, _, result, _), _ = jax.lax.scan(one_step, initial, None, length=steps)
-    return y1, result, steps
+    (y1, _, result, taken), _ = jax.lax.scan(one_step, initial, None, length=steps)
+    return y1, result, taken
 
 
 def uniform_grid_saves(
@@ -137,25 +157,27 @@ def integrate_fixed_steps_saving(
     args: Any,
     dtype: Any = float,
 ) -> tuple[Any, Any, int]:
-    """Fixed steps with the state saved on the step grid: `(ys, result, steps)`.
+    """Fixed steps with the state saved on the step grid:
+    `(ys, result, steps_taken, saved)`.
 
     `grid = (lead, every, saves)` from `uniform_grid_saves`: `lead` steps, a save,
     then `saves − 1` times `every` steps and a save. Two nested `lax.scan`s, so the
-    saving costs one copy per save and nothing per step.
+    saving costs one copy per save and nothing per step. `saved[j]` is False for
+    the saves a failure (see `_step_function`) kept from being reached.
     """
     lead, every, saves = grid
     one_step = _step_function(terms, solver, t0, dt, args, dtype)
     carry = _initial_carry(terms, solver, t0, dt, y0, args, dtype)
     if lead:
         carry, _ = jax.lax.scan(one_step, carry, None, length=lead)
-    first = carry[0]
+    first = carry[0], carry[2] == diffrax.RESULTS.successful
 
     def interval(carry, _):
         carry, _ = jax.lax.scan(one_step, carry, None, length=every)
-        return carry, carry[0]
+        return carry, (carry[0], carry[2] == diffrax.RESULTS.successful)
 
     carry, later = jax.lax.scan(interval, carry, None, length=saves - 1)
-    ys = jax.tree_util.tree_map(
+    ys, saved = jax.tree_util.tree_map(
         lambda a, b: jnp.concatenate([jnp.asarray(a)[None], b]), first, later
     )
-    return ys, carry[2], lead + every * (saves - 1)
+    return ys, carry[2], carry[3], saved

@@ -160,7 +160,9 @@ def simulate(
       `jax.jacfwd` through the solve (reverse mode works with the default).
     - `throw`: raise on failure (max_steps reached, failed implicit solve, non-finite
       state). With False the trajectory up to the failure is returned and
-      `result`/`stats["finite"]` say what happened.
+      `result`/`stats["finite"]` say what happened; on the fixed-step path the
+      final state is the last good one, at the time it was reached, and saves
+      after the failure are marked t = inf (as diffrax marks unused slots).
     """
     y0 = check_simulate_inputs(system, y0, t0, t1, dt, solver, ts, args, max_steps)
     t0, t1, dt = (_as_python_number(x) for x in (t0, t1, dt))
@@ -196,6 +198,7 @@ def simulate(
     if flat is not None:
         ys = flat.unravel(ys)
     finite = _all_saved_states_finite(saved_ts, ys)
+    finite = finite & (result != diffrax.RESULTS.nonfinite)
     if throw:
         ys = eqx.error_if(ys, ~finite, _NON_FINITE_MESSAGE)
     stats["finite"] = finite
@@ -279,21 +282,36 @@ class _Run(NamedTuple):
 
 
 def _integrate_scan(terms, solver, state0, args, run: _Run):
-    """The fixed-step path: `lax.scan`s over the solver's step (`fixed_step.py`)."""
+    """The fixed-step path: `lax.scan`s over the solver's step (`fixed_step.py`).
+
+    A failed run (a failed implicit solve, a non-finite state) keeps what it
+    computed: the final-state run returns the last good state at the time it was
+    reached, a saving run its saves up to the failure, with the later ones marked
+    as diffrax marks unused slots (t = inf, states inf).
+    """
     step = grid_step(run.t0, run.t1, run.dt, run.dtype)
     if run.ts is None:
         y1, result, steps = integrate_fixed_steps(
             terms, solver, run.t0, run.t1, step, state0, args, run.dtype
         )
-        saved_ts = jnp.asarray([run.t1], dtype=run.dtype)
+        signed = math.copysign(abs(step), run.t1 - run.t0)
+        reached = jnp.where(
+            result == diffrax.RESULTS.successful, run.t1, run.t0 + steps * signed
+        )
+        saved_ts = jnp.asarray(reached, dtype=run.dtype)[None]
         ys = jax.tree_util.tree_map(lambda x: jnp.asarray(x)[None], y1)
     else:
         step = math.copysign(abs(step), run.t1 - run.t0)
-        ys, result, steps = integrate_fixed_steps_saving(
+        ys, result, steps, saved = integrate_fixed_steps_saving(
             terms, solver, run.t0, step, run.save_grid(), state0, args, run.dtype
         )
-        saved_ts = run.ts
+        saved_ts = jnp.where(saved, run.ts, jnp.inf)
+        ys = jax.tree_util.tree_map(
+            lambda x: jnp.where(saved.reshape((-1,) + (1,) * (x.ndim - 1)), x, jnp.inf),
+            ys,
+        )
     if run.throw:
+        ys = eqx.error_if(ys, result == diffrax.RESULTS.nonfinite, _NON_FINITE_MESSAGE)
         ys = result.error_if(ys, result != diffrax.RESULTS.successful)
     counts = jnp.asarray(steps)
     stats = dict(

@@ -1,0 +1,54 @@
+"""A failed fixed-step run keeps what it computed, says where it stopped, and why.
+
+Störmer–Verlet is stable only for ωh < 2 (HLW §I.5): on q̈ = −ω²q with ω = 100 and
+h = 0.03 (ωh = 3) each step multiplies the state by ≈ 8.9, so it overflows to inf
+within a few hundred steps.
+"""
+
+import diffrax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import lagjax as lj
+
+STIFF = lj.SeparableHamiltonian(lambda p: 0.5 * p**2, lambda q: 5e3 * q**2)
+START = (jnp.asarray(1.0), jnp.asarray(0.0))
+UNSTABLE = dict(t1=100.0, dt=0.03, solver=lj.StormerVerlet())
+
+
+def test_blow_up_raises_by_default():
+    with pytest.raises(Exception, match="non-finite"):
+        lj.simulate(STIFF, START, **UNSTABLE)
+
+
+def test_blow_up_with_throw_false_returns_the_last_finite_state():
+    run = lj.simulate(STIFF, START, throw=False, **UNSTABLE)
+    assert run.result == diffrax.RESULTS.nonfinite
+    assert not bool(run.stats["finite"])
+    stopped = float(run.ts[0])
+    steps = int(run.stats["num_steps"])
+    assert 0.0 < stopped < 100.0
+    assert stopped == pytest.approx(steps * 0.03, rel=1e-12)
+    assert np.all(np.isfinite(np.asarray(run.q))) and abs(float(run.q[0])) > 1e100
+
+
+def test_blow_up_while_saving_keeps_the_saves_before_it():
+    ts = jnp.linspace(0.0, 90.0, 31)  # every 100 steps
+    run = lj.simulate(STIFF, START, ts=ts, throw=False, **UNSTABLE)
+    assert run.result == diffrax.RESULTS.nonfinite
+    kept = np.isfinite(np.asarray(run.ts))
+    assert kept[0] and not kept[-1]
+    np.testing.assert_array_equal(np.asarray(run.ts)[kept], np.asarray(ts)[kept])
+    assert np.all(np.isfinite(np.asarray(run.q)[kept]))
+    assert np.all(np.isinf(np.asarray(run.q)[~kept]))
+
+
+def test_failed_implicit_solve_returns_the_state_before_it():
+    # One stage iteration cannot converge on this stiff step: the first step fails.
+    solver = lj.GaussLegendre(stages=2, root_find_max_steps=1)
+    run = lj.simulate(STIFF, START, t1=1.0, dt=0.1, solver=solver, throw=False)
+    assert run.result != diffrax.RESULTS.successful
+    assert float(run.ts[0]) < 1.0
+    assert int(run.stats["num_steps"]) == round(float(run.ts[0]) / 0.1)
+    assert np.isfinite(float(run.q[0]))
