@@ -94,6 +94,7 @@ def equilibrium(
     return unravel(solution.value)
 
 
+@eqx.filter_jit  # nested derivatives dispatched op by op cost seconds
 def stiffness_matrices(
     lag: Lagrangian, q_eq: Any, args: Any = None, *, t: Any = 0.0
 ) -> tuple[jax.Array, jax.Array]:
@@ -107,6 +108,7 @@ def stiffness_matrices(
     return kinetic, potential
 
 
+@eqx.filter_jit  # nested derivatives dispatched op by op cost seconds
 def gyroscopic_matrix(
     lag: Lagrangian, q_eq: Any, args: Any = None, *, t: Any = 0.0
 ) -> jax.Array:
