@@ -36,6 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from .divergence import DIVERGENCE_MESSAGE, diverged, energy_drift
 from .fixed_step import (
     fixed_step_count,
     integrate_fixed_steps,
@@ -162,7 +163,10 @@ def simulate(
       state). With False the trajectory up to the failure is returned and
       `result`/`stats["finite"]` say what happened; on the fixed-step path the
       final state is the last good one, at the time it was reached, and saves
-      after the failure are marked t = inf (as diffrax marks unused slots).
+      after the failure are marked t = inf (as diffrax marks unused slots). A
+      fixed-step run of a conservative system whose energy left any sane bound
+      (`lagjax.divergence`) is a failure too: `RESULTS.nonlinear_divergence`, and
+      `stats["energy_drift"]` holds the measured ratio.
     """
     y0 = check_simulate_inputs(system, y0, t0, t1, dt, solver, ts, args, max_steps)
     t0, t1, dt = (_as_python_number(x) for x in (t0, t1, dt))
@@ -188,6 +192,7 @@ def simulate(
     solver = system.adapt_solver(solver)
     terms, state0, integrated = system.integration(solver, y0, t0, args)
     # One vector is what diffrax's loops run fastest (lagjax.flat_state).
+    start = state0
     terms, state0, flat = flattened(terms, state0, saveat)
     if dt is not None:
         solver = _with_implicit_tolerances(solver, rtol, atol)
@@ -202,6 +207,18 @@ def simulate(
     if throw:
         ys = eqx.error_if(ys, ~finite, _NON_FINITE_MESSAGE)
     stats["finite"] = finite
+    if run.fits_scan():
+        # Fixed steps can outrun a method's stability limit with a finite state;
+        # judged once, after the loop (lagjax.divergence).
+        drift = energy_drift(integrated, start, t0, saved_ts, ys, args)
+        result = diffrax.RESULTS.where(
+            diverged(drift) & (result == diffrax.RESULTS.successful),
+            diffrax.RESULTS.nonlinear_divergence,
+            result,
+        )
+        if throw:
+            ys = eqx.error_if(ys, diverged(drift), DIVERGENCE_MESSAGE)
+        stats["energy_drift"] = drift
     return Trajectory(
         ts=saved_ts,
         ys=ys,

@@ -13,6 +13,7 @@ shooting code call nothing else:
 | q̇, p and the energy at an integrated state `(q, second)` | `state_velocity`, `state_momentum`, `state_energy` |
 | is the second state component q̇ or p? | `second_is_momentum` |
 | L along a path (the action) | `path_lagrangian()` |
+| is the energy conserved when autonomous? (divergence checks) | `conserves_energy_if_autonomous()` |
 
 The integrated state is the user's `y0` convention or the canonical one: a
 `Lagrangian` integrated by a symplectic method runs on (q, p) of its Legendre
@@ -78,6 +79,11 @@ class AbstractSystem(eqx.Module):
     @abc.abstractmethod
     def state_energy(self, q: Any, second: Any, t: Any, args: Any) -> Any:
         """H, or Jacobi's integral h, at the integrated state."""
+
+    def conserves_energy_if_autonomous(self) -> bool:
+        """Whether the energy is conserved when nothing depends on t explicitly:
+        no generalized forces, dissipation or constraints (`lagjax.divergence`)."""
+        return True
 
     def path_lagrangian(self) -> Lagrangian:
         """The Lagrangian whose ∫L dt is this system's action along a path."""

@@ -52,3 +52,35 @@ def test_failed_implicit_solve_returns_the_state_before_it():
     assert float(run.ts[0]) < 1.0
     assert int(run.stats["num_steps"]) == round(float(run.ts[0]) / 0.1)
     assert np.isfinite(float(run.q[0]))
+
+
+def test_finite_blow_up_of_a_conservative_run_is_a_divergence():
+    # 300 unstable steps: energy ≈ 1e20 against 5e3, every number still finite.
+    short = dict(UNSTABLE, t1=9.0)
+    with pytest.raises(Exception, match="diverged"):
+        lj.simulate(STIFF, START, **short)
+    run = lj.simulate(STIFF, START, throw=False, **short)
+    assert bool(run.stats["finite"])
+    assert run.result == diffrax.RESULTS.nonlinear_divergence
+    assert float(run.stats["energy_drift"]) > 1e10
+
+
+def test_stable_runs_and_driven_systems_are_not_judged_diverged():
+    stable = lj.simulate(STIFF, START, t1=9.0, dt=0.001, solver=lj.StormerVerlet())
+    assert stable.result == diffrax.RESULTS.successful
+    # Störmer–Verlet's energy error on the oscillator is of order (ωh)²/4 = 2.5e-3.
+    assert 1e-4 < float(stable.stats["energy_drift"]) < 2.5e-3
+    # A driven oscillator at resonance gains energy without bound: not judged.
+    driven = lj.Lagrangian(
+        lambda q, qdot, t: 0.5 * qdot**2 - 0.5 * q**2 + 10.0 * q * jnp.sin(t)
+    )
+    run = lj.simulate(driven, (0.0, 0.0), t1=200.0, dt=0.01)
+    assert run.result == diffrax.RESULTS.successful
+    assert np.isnan(float(run.stats["energy_drift"]))
+    # Dissipation: the energy falls, and is not judged either.
+    damped = lj.Lagrangian(
+        lambda q, qdot: 0.5 * qdot**2 - 0.5 * q**2, dissipation=lambda qd: qd**2
+    )
+    assert np.isnan(
+        float(lj.simulate(damped, (1.0, 0.0), t1=5.0, dt=0.01).stats["energy_drift"])
+    )

@@ -248,6 +248,9 @@ class LegendreHamiltonian(AbstractHamiltonian):
         """The Lagrangian this Hamiltonian was transformed from (exact round trip)."""
         return self.lagrangian
 
+    def conserves_energy_if_autonomous(self) -> bool:
+        return self.lagrangian.conserves_energy_if_autonomous()
+
 
 class HamiltonianLegendreDual(eqx.Module):
     """L(q, q̇, t, args) = p·q̇ − H with p solved from q̇ = ∂H/∂p (a callable)."""

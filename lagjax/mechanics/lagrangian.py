@@ -324,3 +324,8 @@ class Lagrangian(AbstractSystem):
 
     def path_lagrangian(self) -> Lagrangian:
         return self
+
+    def conserves_energy_if_autonomous(self) -> bool:
+        return (
+            self.force is None and self.dissipation is None and self.constraints is None
+        )

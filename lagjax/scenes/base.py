@@ -253,6 +253,9 @@ class AbstractScene(AbstractSystem):
     def path_lagrangian(self) -> Lagrangian:
         return self.system().path_lagrangian()
 
+    def conserves_energy_if_autonomous(self) -> bool:
+        return self.system().conserves_energy_if_autonomous()
+
     def checks(self, trajectory: Any) -> dict[str, tuple[jax.Array, jax.Array]]:
         """{name: (measured, expected)} from a trajectory of this scene.
 
