@@ -281,3 +281,10 @@ def test_bad_arguments_name_the_problem():
     pushed = lj.Lagrangian(lambda q, qd: 0.5 * qd**2 + 2.0 * q)
     with pytest.raises(ValueError, match=r"did not converge .* \[2\.\]"):
         lj.relative_equilibrium(pushed, 0.3)
+
+
+def test_a_singular_mass_matrix_is_refused_not_called_stable():
+    # L = ½(q̇₀ + q̇₁)² − ½|q|²: M = [[1, 1], [1, 1]] is singular.
+    lag = lj.Lagrangian(lambda q, qd: 0.5 * (qd[0] + qd[1]) ** 2 - 0.5 * q @ q)
+    with pytest.raises(Exception, match="singular"):
+        lj.linearize(lag, (jnp.zeros(2), jnp.zeros(2)))

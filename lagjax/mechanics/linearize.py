@@ -320,6 +320,7 @@ def linearize(
         args = system if args is None else args
         system = system.system()
     jacobian, rate, parts = _derivatives(system, equilibrium, t, args, inputs)
+    jacobian = _require_finite(jacobian, rate)
     if check_equilibrium:
         jacobian = stability.check_stationary(
             jacobian,
@@ -347,6 +348,22 @@ def linearize(
 
 def _no_field(x):
     raise AssertionError("the field is only used inside _derivatives")
+
+
+_NOT_FINITE = (
+    "The linearization is not finite at this state: is the mass matrix ∂²L/∂q̇∂q̇ "
+    "(or ∂²H/∂p∂p) singular there, or a coordinate singular (e.g. Euler angles at "
+    "gimbal lock)? Linearize in other coordinates or at another state."
+)
+
+
+def _require_finite(jacobian: jax.Array, rate: jax.Array) -> jax.Array:
+    bad = ~(jnp.all(jnp.isfinite(jacobian)) & jnp.all(jnp.isfinite(rate)))
+    if stability.is_concrete(bad):
+        if bool(bad):
+            raise ValueError(_NOT_FINITE)
+        return jacobian
+    return eqx.error_if(jacobian, bad, _NOT_FINITE)
 
 
 # Compiled as a whole: op-by-op dispatch of the nested derivatives costs seconds.

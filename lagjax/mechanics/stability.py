@@ -63,10 +63,11 @@ def classify(eigenvalues: jax.Array, *, conservative: bool) -> jax.Array:
     threshold = EIGENVALUE_RTOL * scale
     rate = jnp.real(eigenvalues)
     growth = jnp.abs(rate) if conservative else rate
+    # Written so that a NaN eigenvalue (or scale) lands on UNSTABLE, never STABLE.
     return jnp.where(
         size <= threshold,
         MARGINAL,
-        jnp.where(growth > threshold, UNSTABLE, STABLE),
+        jnp.where(growth <= threshold, STABLE, UNSTABLE),
     )
 
 
