@@ -62,6 +62,7 @@ import jax
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
+from .functions import function_field
 from .linalg import solve_dense
 from .signature import call_with_arity, positional_arity
 
@@ -105,9 +106,9 @@ class Constraints(eqx.Module):
     holonomic rows first, then velocity rows.
     """
 
-    holonomic: Callable | None = eqx.field(static=True)
+    holonomic: Callable | None = function_field()
     holonomic_arity: int = eqx.field(static=True)
-    velocity: Callable | None = eqx.field(static=True)
+    velocity: Callable | None = function_field()
     velocity_arity: int = eqx.field(static=True)
     baumgarte_rate: float = eqx.field(static=True)
 

@@ -27,6 +27,7 @@ import equinox as eqx
 import jax
 
 from ..system import AbstractSystem, is_partitioned
+from .functions import function_field
 from .lagrangian import Lagrangian
 from .legendre import invert_gradient, tree_dot
 from .signature import (
@@ -131,7 +132,7 @@ class Hamiltonian(AbstractHamiltonian):
     Legendre transform to L a single linear solve.
     """
 
-    function: Callable = eqx.field(static=True)
+    function: Callable = function_field()
     arity: int = eqx.field(static=True)
     quadratic_in_momentum: bool = eqx.field(static=True)
 
@@ -153,9 +154,9 @@ class SeparableHamiltonian(AbstractHamiltonian):
     to False for a non-quadratic kinetic energy such as the relativistic one.
     """
 
-    kinetic: Callable = eqx.field(static=True)
+    kinetic: Callable = function_field()
     kinetic_arity: int = eqx.field(static=True)
-    potential: Callable = eqx.field(static=True)
+    potential: Callable = function_field()
     potential_arity: int = eqx.field(static=True)
     quadratic_in_momentum: bool = eqx.field(static=True)
 
@@ -255,7 +256,7 @@ class LegendreHamiltonian(AbstractHamiltonian):
 class HamiltonianLegendreDual(eqx.Module):
     """L(q, q̇, t, args) = p·q̇ − H with p solved from q̇ = ∂H/∂p (a callable)."""
 
-    hamiltonian: AbstractHamiltonian = eqx.field(static=True)
+    hamiltonian: AbstractHamiltonian
 
     @eqx.filter_jit
     def __call__(self, q: Any, qdot: Any, t: Any, args: Any) -> jax.Array:

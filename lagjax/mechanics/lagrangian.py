@@ -26,6 +26,7 @@ from jax.flatten_util import ravel_pytree
 from ..system import AbstractSystem, is_partitioned
 from .constraints import Constraints, constrained_motion
 from .euler_lagrange import euler_lagrange_acceleration
+from .functions import function_field
 from .legendre import tree_dot
 from .signature import (
     call_with_arity,
@@ -65,11 +66,11 @@ class Lagrangian(AbstractSystem):
     `t` defaults to 0.0 and `args` to None in every method.
     """
 
-    function: Callable = eqx.field(static=True)
+    function: Callable = function_field()
     arity: int = eqx.field(static=True)
-    force: Callable | None = eqx.field(static=True)
+    force: Callable | None = function_field()
     force_arity: int = eqx.field(static=True)
-    dissipation: Callable | None = eqx.field(static=True)
+    dissipation: Callable | None = function_field()
     dissipation_arity: int = eqx.field(static=True)
     quadratic_in_velocity: bool = eqx.field(static=True)
     constraints: Constraints | None

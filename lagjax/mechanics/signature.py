@@ -16,6 +16,8 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
+from .functions import StaticFunction
+
 _POSITIONAL = (
     inspect.Parameter.POSITIONAL_ONLY,
     inspect.Parameter.POSITIONAL_OR_KEYWORD,
@@ -82,6 +84,8 @@ def call_with_arity(fn: Callable, arity: int, *arguments: Any) -> Any:
 
 def _name_of(fn: Callable) -> str:
     """'the function name (file.py:line)' for messages about a user function."""
+    if isinstance(fn, StaticFunction):  # how a system stores a plain function
+        fn = fn.function
     name = getattr(fn, "__qualname__", None) or type(fn).__name__
     code = getattr(fn, "__code__", None)
     where = (
