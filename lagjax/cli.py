@@ -5,17 +5,26 @@
                      [--batch N] [--plot out.png] [--save out.npz] [--backward]
     lagjax bench [--quick]
 
-Bad arguments exit with status 2 and one line naming the problem; a failed run
-(e.g. a singular mass matrix) exits with status 1 and says why.
+The command never shows a traceback. Bad arguments — an unknown scene or solver, a
+parameter out of its physical range (`--param mass=-1`), a non-finite or hopeless
+step (`--dt nan`, `--dt 1e-300`), an output path that cannot be written — are
+refused *before* anything is compiled, with exit status 2 and one line
+`lagjax: error: …` naming the problem. A run that fails (a singular mass matrix, a
+stage solve that does not converge) exits with status 1 and says why. Ctrl-C stops
+a run cleanly (status 130): long runs go in chunks, and the states computed up to
+the interrupt are still saved when `--save` asked for them.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import logging
+import math
+import os
 import sys
-import time
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any, NoReturn
 
 import jax
@@ -23,15 +32,18 @@ import jax
 jax.config.update("jax_enable_x64", True)
 
 import diffrax  # noqa: E402
-import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
-from jax.flatten_util import ravel_pytree  # noqa: E402
 
 from . import scenes as scene_catalog  # noqa: E402
-from .simulate import simulate  # noqa: E402
-from .solvers.implicit import GaussLegendre, ImplicitMidpoint  # noqa: E402
-from .solvers.rattle import Rattle  # noqa: E402
+from .cli_run import Outcome, UsageError, first_line, run_scene  # noqa: E402
+from .solvers.implicit import (  # noqa: E402
+    AbstractGaussLegendre,
+    GaussLegendre,
+    ImplicitMidpoint,
+    stage_failure_message,
+)
 from .solvers.lie_poisson import RigidBodyVerlet, RigidBodyYoshida4  # noqa: E402
+from .solvers.rattle import Rattle  # noqa: E402
 from .solvers.splitting import (  # noqa: E402
     BlanesMoan4,
     KahanLi8,
@@ -41,6 +53,7 @@ from .solvers.splitting import (  # noqa: E402
     Yoshida6,
 )
 from .solvers.variational import VariationalMidpoint  # noqa: E402
+from .validation import check_times  # noqa: E402
 
 SOLVERS: dict[str, Callable[[], diffrax.AbstractSolver]] = {
     "StormerVerlet": StormerVerlet,
@@ -62,12 +75,7 @@ SOLVERS: dict[str, Callable[[], diffrax.AbstractSolver]] = {
     "RigidBodyYoshida4": RigidBodyYoshida4,
     "Rattle": Rattle,
 }
-SAVED_POINTS = 401
-PROGRESS_STEPS = 200_000
-
-
-class UsageError(Exception):
-    """A bad command-line argument: reported in one line, exit status 2."""
+INTERRUPTED = 130  # the shell's status for a run stopped by SIGINT
 
 
 class _Parser(argparse.ArgumentParser):
@@ -75,14 +83,21 @@ class _Parser(argparse.ArgumentParser):
         raise UsageError(message)
 
 
-def _parse_param(text: str) -> tuple[str, float]:
+# -- arguments ---------------------------------------------------------------------
+
+
+def _parse_param(text: str) -> tuple[str, np.ndarray]:
+    """`NAME=VALUE` or `NAME=V1,V2,V3` (a vector parameter), finite numbers only."""
     name, sep, value = text.partition("=")
     if not sep or not name:
         raise UsageError(f"--param expects NAME=VALUE, got {text!r}")
     try:
-        return name, float(value)
+        numbers = [float(part) for part in value.split(",")]
     except ValueError:
         raise UsageError(f"--param {name}: {value!r} is not a number") from None
+    if not all(math.isfinite(x) for x in numbers):
+        raise UsageError(f"--param {name}={value}: parameters must be finite numbers")
+    return name, np.asarray(numbers if len(numbers) > 1 else numbers[0])
 
 
 def _build_scene(name: str, params: Sequence[str]):
@@ -91,25 +106,58 @@ def _build_scene(name: str, params: Sequence[str]):
         raise UsageError(f"unknown scene {name!r}; `lagjax scenes` lists them")
     scene_class = catalog[name]
     values = dict(_parse_param(text) for text in params)
+    default = scene_class()
+    fields = {field.name for field in dataclasses.fields(scene_class)}
+    for key, value in values.items():
+        if key not in fields:
+            known = ", ".join(sorted(fields)) or "none"
+            raise UsageError(
+                f"scene {name} has no parameter {key!r} (unexpected keyword); its "
+                f"parameters: {known}"
+            )
+        expected = np.shape(getattr(default, key))
+        if value.shape != expected:
+            raise UsageError(
+                f"--param {key}: scene {name} needs {_shape_words(expected)}, got "
+                f"{_shape_words(value.shape)}"
+                + (f"; e.g. {key}=1,2,3" if expected == (3,) else "")
+            )
     try:
         return scene_class(**values)
-    except TypeError as error:
-        raise UsageError(f"scene {name}: {error}") from None
+    except (ValueError, TypeError) as error:
+        given = " ".join(f"{k}={_format(v)}" for k, v in values.items())
+        raise UsageError(f"--param {given}: {first_line(error)}") from None
+
+
+def _shape_words(shape: tuple[int, ...]) -> str:
+    if shape == ():
+        return "one number"
+    count = int(np.prod(shape))
+    return f"{count} comma-separated numbers"
 
 
 def _options(scene, args) -> tuple[float, float | None, Any]:
     t1 = scene.default_t1 if args.t1 is None else args.t1
     dt = scene.default_dt if args.dt is None else args.dt
+    for flag, value in (("--t1", t1), ("--dt", dt)):
+        if value is not None and not math.isfinite(value):
+            raise UsageError(f"{flag} must be a finite number, got {value}")
     if dt is not None and dt <= 0:
         raise UsageError(
             f"--dt must be positive, got {dt} (use --backward to run back)"
         )
+    if t1 == 0:
+        raise UsageError("--t1 must be non-zero: the run goes from t = 0 to t1")
     if t1 < 0 and not args.backward:
         raise UsageError(
             f"--t1 {t1} is before t0 = 0; pass --backward to run backwards"
         )
     if args.backward:
         t1, dt = -abs(t1), None if dt is None else -abs(dt)
+    try:
+        check_times(0.0, t1, dt)
+    except ValueError as error:
+        raise UsageError(str(error).replace("dt = ", "--dt ", 1)) from None
     if args.solver is not None and args.solver not in SOLVERS:
         raise UsageError(
             f"unknown solver {args.solver!r}; choose from {', '.join(SOLVERS)}"
@@ -120,66 +168,62 @@ def _options(scene, args) -> tuple[float, float | None, Any]:
     return t1, dt, solver
 
 
-def _perturbed_batch(state, batch: int):
-    """`batch` copies of a state, each scaled by 1 + 1e-3·(k − batch/2)/batch."""
-    factors = 1.0 + 1e-3 * (jnp.arange(batch) - batch / 2) / batch
-
-    def spread(leaf):
-        leaf = jnp.asarray(leaf)
-        return factors.reshape((batch,) + (1,) * leaf.ndim) * leaf
-
-    return jax.tree_util.tree_map(spread, state)
-
-
-def _save_times(t1: float, dt: float | None) -> jax.Array:
-    """About SAVED_POINTS times; on the step grid for fixed steps, so the saved
-    states are the solver's own, not interpolated between steps."""
-    if dt is None:
-        return jnp.linspace(0.0, t1, SAVED_POINTS)
-    steps = int(np.floor(abs(t1 / dt) + 1e-9))
-    stride = max(1, steps // (SAVED_POINTS - 1))
-    grid = np.arange(0, steps + 1, stride) * dt
-    return jnp.asarray(
-        np.unique(np.append(grid, t1)) if t1 > 0 else np.append(grid, t1)
-    )
+def _check_output(path: str | None, flag: str) -> None:
+    """Refuse, before the run, an output path that cannot be written."""
+    if path is None:
+        return
+    target = Path(path)
+    if path == "" or target.is_dir():
+        raise UsageError(f"{flag} {path!r} is a directory; give a file name")
+    parent = target.parent if str(target.parent) else Path(".")
+    if not parent.is_dir():
+        raise UsageError(f"{flag} {path}: the folder {parent} does not exist")
+    if not os.access(parent, os.W_OK) or (
+        target.exists() and not os.access(target, os.W_OK)
+    ):
+        raise UsageError(f"{flag} {path}: not writable")
+    if flag == "--plot":
+        _check_plot_format(target, flag)
 
 
-def _run(scene, t1: float, dt: float | None, solver, batch: int | None):
-    ts = _save_times(t1, dt)
-    steps = abs(t1 / dt) if dt else 0
-    kwargs: dict[str, Any] = dict(
-        t1=t1, dt=dt, solver=solver, ts=ts, progress=steps > PROGRESS_STEPS
-    )
-    if dt is not None:
-        kwargs["max_steps"] = int(steps) + 2
+def _check_plot_format(target: Path, flag: str) -> None:
+    try:
+        import matplotlib
+    except ImportError:
+        raise UsageError(
+            f"{flag} needs matplotlib: pip install matplotlib (or lagjax[plot])"
+        ) from None
+    matplotlib.use("Agg")
+    from matplotlib.backend_bases import FigureCanvasBase
 
-    def one(state):
-        return simulate(scene, state, **kwargs)
-
-    state = scene.initial_state()
-    function = one if batch is None else jax.vmap(one)
-    inputs = state if batch is None else _perturbed_batch(state, batch)
-    start = time.perf_counter()
-    compiled = jax.jit(function).lower(inputs).compile()
-    compile_time = time.perf_counter() - start
-    start = time.perf_counter()
-    trajectory = jax.block_until_ready(compiled(inputs))
-    return trajectory, compile_time, time.perf_counter() - start
+    formats = FigureCanvasBase.get_supported_filetypes()
+    suffix = target.suffix.lstrip(".").lower()
+    if suffix not in formats:
+        raise UsageError(
+            f"{flag} {target}: unknown image format {suffix!r}; use one of "
+            f"{', '.join(sorted(formats))} (e.g. run.png)"
+        )
 
 
-def _summary(scene, name, trajectory, compile_time, run_time, batch) -> list[str]:
-    first = (
-        trajectory
-        if batch is None
-        else jax.tree_util.tree_map(lambda x: x[0], trajectory)
-    )
+# -- reporting ---------------------------------------------------------------------
+
+
+def _first_of_batch(trajectory, batch: int | None):
+    if batch is None:
+        return trajectory
+    return jax.tree_util.tree_map(lambda x: x[0], trajectory)
+
+
+def _summary(scene, name: str, outcome: Outcome, batch: int | None) -> list[str]:
+    first = _first_of_batch(outcome.trajectory, batch)
     energy = np.asarray(first.energy())
     scale = max(abs(energy[0]), 1e-300)
     lines = [
-        f"scene     {name}: {(type(scene).__doc__ or '').strip().splitlines()[0]}",
-        f"solver    {first.stats['solver']}, {int(first.stats['num_steps'])} steps"
+        f"scene     {name}: {first_line((type(scene).__doc__ or '').strip())}",
+        f"solver    {first.stats['solver']}, {outcome.steps} steps"
         + ("" if batch is None else f", batch of {batch}"),
-        f"time      run {run_time:.3f} s (excluding compile), compile {compile_time:.2f} s",
+        f"time      run {outcome.run_time:.3f} s (excluding compile), "
+        f"compile {outcome.compile_time:.2f} s",
         f"energy    max relative error {np.max(np.abs(energy - energy[0])) / scale:.2e}",
     ]
     for check, (measured, expected) in scene.checks(first).items():
@@ -196,38 +240,13 @@ def _summary(scene, name, trajectory, compile_time, run_time, batch) -> list[str
     return lines
 
 
-def _format(values: np.ndarray) -> str:
+def _format(values: Any) -> str:
     flat = [f"{float(x):.10g}" for x in np.ravel(values)]
     return flat[0] if len(flat) == 1 else "(" + ", ".join(flat) + ")"
 
 
-def _plot(path: str, name: str, trajectory) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    ts = np.asarray(trajectory.ts)
-    flat_q = np.asarray(jax.vmap(lambda q: ravel_pytree(q)[0])(trajectory.q))
-    energy = np.asarray(trajectory.energy())
-    figure, (top, bottom) = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
-    for index in range(flat_q.shape[1]):
-        top.plot(ts, flat_q[:, index], label=f"q[{index}]")
-    if flat_q.shape[1] <= 8:
-        top.legend(loc="upper right", fontsize="small")
-    top.set_ylabel("generalized coordinates q")
-    top.set_title(f"lagjax run {name}")
-    bottom.semilogy(
-        ts[1:], np.abs(energy[1:] - energy[0]) / max(abs(energy[0]), 1e-300) + 1e-17
-    )
-    bottom.set_xlabel("t [s]")
-    bottom.set_ylabel("relative energy error")
-    figure.tight_layout()
-    figure.savefig(path, dpi=120)
-    plt.close(figure)
-
-
 def _save(path: str, trajectory) -> None:
+    """Write the run to exactly `path` (np.savez would append `.npz` to a name)."""
     q_leaves = jax.tree_util.tree_leaves(trajectory.q)
     second = jax.tree_util.tree_leaves(trajectory.ys[1])
     arrays = {
@@ -237,47 +256,67 @@ def _save(path: str, trajectory) -> None:
     arrays.update({f"q{i}": np.asarray(x) for i, x in enumerate(q_leaves)})
     label = "p" if trajectory.is_hamiltonian else "qdot"
     arrays.update({f"{label}{i}": np.asarray(x) for i, x in enumerate(second)})
-    np.savez(path, **arrays)  # pyright: ignore[reportArgumentType]
+    with open(path, "wb") as file:
+        np.savez(file, **arrays)  # pyright: ignore[reportArgumentType]
+
+
+# -- commands ----------------------------------------------------------------------
 
 
 def _command_run(args) -> int:
     scene = _build_scene(args.scene, args.param)
     t1, dt, solver = _options(scene, args)
-    trajectory, compile_time, run_time = _run(scene, t1, dt, solver, args.batch)
-    for line in _summary(
-        scene, args.scene, trajectory, compile_time, run_time, args.batch
-    ):
+    _check_output(args.plot, "--plot")
+    _check_output(args.save, "--save")
+    try:
+        outcome = run_scene(scene, t1, dt, solver, args.batch)
+    except (UsageError, KeyboardInterrupt):
+        raise
+    except Exception as error:
+        raise RunFailed(_reason(error, scene, solver, dt)) from None
+    first = _first_of_batch(outcome.trajectory, args.batch)
+    if outcome.interrupted:
+        reached = float(np.asarray(first.ts)[-1])
+        saved = ""
+        if args.save:
+            _save(args.save, first)
+            saved = f"; the {np.size(first.ts)} states up to there are in {args.save}"
+        print(
+            f"lagjax: interrupted at t = {reached:.6g} of {t1:g}{saved}",
+            file=sys.stderr,
+        )
+        return INTERRUPTED
+    for line in _summary(scene, args.scene, outcome, args.batch):
         print(line)
-    first = (
-        trajectory
-        if args.batch is None
-        else jax.tree_util.tree_map(lambda x: x[0], trajectory)
-    )
-    if args.plot:
-        _plot(args.plot, args.scene, first)
-        print(f"plot      {args.plot}")
-    if args.save:
+    if args.save:  # data first: a failing plot must not lose the run
         _save(args.save, first)
         print(f"data      {args.save}")
+    if args.plot:
+        from .cli_plot import plot_run
+
+        plot_run(args.plot, args.scene, scene, first)
+        print(f"plot      {args.plot}")
     return 0
 
 
 def _command_scenes(_args) -> int:
-    for name, scene_class in scene_catalog.catalog().items():
-        print(f"{name:24s} {(scene_class.__doc__ or '').strip().splitlines()[0]}")
+    print(scene_catalog.describe())
     return 0
 
 
 def _command_bench(args) -> int:
-    import runpy
-    from pathlib import Path
+    """Run the work-precision benchmark of a clone of the repository."""
+    import subprocess
 
-    script = Path(__file__).resolve().parent.parent / "benchmarks" / "work_precision.py"
-    if not script.exists():
-        raise UsageError("the benchmarks/ folder is not next to this installation")
-    sys.argv = [str(script)] + (["--quick"] if args.quick else [])
-    runpy.run_path(str(script), run_name="__main__")
-    return 0
+    root = Path(__file__).resolve().parent.parent
+    if not (root / "benchmarks" / "work_precision.py").exists():
+        raise UsageError(
+            "`lagjax bench` runs the benchmarks/ folder of a clone of the "
+            "repository, which an installed wheel does not contain: clone the "
+            "repository and run `python -m benchmarks.work_precision` in it"
+        )
+    command = [sys.executable, "-m", "benchmarks.work_precision"]
+    return subprocess.call(command + (["--quick"] if args.quick else []), cwd=root)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -294,40 +333,69 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument("--dt", type=float, default=None, help="fixed step [s]")
     run.add_argument("--solver", default=None, help=f"one of: {', '.join(SOLVERS)}")
     run.add_argument(
-        "--param", action="append", default=[], help="scene parameter NAME=VALUE"
+        "--param",
+        action="append",
+        default=[],
+        help="scene parameter NAME=VALUE (a vector: NAME=V1,V2,V3)",
     )
     run.add_argument(
         "--batch", type=int, default=None, help="run N perturbed copies (vmap)"
     )
     run.add_argument(
-        "--plot", default=None, help="write a PNG of q(t) and the energy error"
+        "--plot", default=None, help="write a figure (PNG, PDF, SVG) of the run"
     )
     run.add_argument("--save", default=None, help="write the trajectory as .npz")
     run.add_argument("--backward", action="store_true", help="integrate towards t1 < 0")
     run.set_defaults(handler=_command_run)
-    bench = commands.add_parser("bench", help="run the benchmark report")
+    bench = commands.add_parser(
+        "bench", help="run the benchmark report (needs a clone)"
+    )
     bench.add_argument("--quick", action="store_true")
     bench.set_defaults(handler=_command_bench)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command; return its exit status (0 done, 1 run failed, 2 bad
+    arguments, 130 interrupted). Never raises, never prints a traceback."""
     # JAX logs a traceback of its own when a run-time check fires inside a compiled
     # run; the command reports the reason in one line instead.
     logging.getLogger("jax._src.callback").setLevel(logging.CRITICAL)
     try:
         args = _parser().parse_args(argv)
         return args.handler(args)
+    except SystemExit as done:  # --help
+        return done.code if isinstance(done.code, int) else 0
     except UsageError as error:
-        print(f"lagjax: error: {error}", file=sys.stderr)
+        _error(str(error))
         return 2
-    except Exception as error:  # a run that failed: say why in one line
-        print(f"lagjax: run failed: {_reason(error)}", file=sys.stderr)
+    except KeyboardInterrupt:
+        _error("interrupted before any state was computed; nothing saved")
+        return INTERRUPTED
+    except RunFailed as error:
+        _error(f"run failed: {error}")
+        return 1
+    except Exception as error:  # anything else: still one line, never a traceback
+        _error(f"run failed: {_reason(error)}")
         return 1
 
 
-def _reason(error: Exception) -> str:
-    """The line of an (often long, JIT-wrapped) error message that says what failed."""
+def _error(message: str) -> None:
+    print(f"lagjax: error: {first_line(message)}", file=sys.stderr)
+
+
+class RunFailed(Exception):
+    """A run that started and failed: reported in one line, exit status 1."""
+
+
+def _reason(error: Exception, scene=None, solver=None, dt=None) -> str:
+    """The line of an (often long, JIT-wrapped) error message that says what failed;
+    for a failed implicit stage solve, what to change (`stage_failure_message`)."""
+    text = str(error)
+    if scene is not None and ("nonlinear solver" in text or "Nonfinite" in text):
+        chosen = solver if solver is not None else scene.default_solver(dt)
+        if isinstance(chosen, AbstractGaussLegendre):
+            return stage_failure_message(chosen)
     lines = [line.strip() for line in str(error).splitlines() if line.strip()]
     keywords = (
         "singular",
@@ -335,9 +403,15 @@ def _reason(error: Exception) -> str:
         "Nonfinite",
         "maximum number of steps",
         "nonlinear solver",
+        "diverge",
     )
+    # equinox's run-time errors carry the reason after the class name, below a
+    # copy of the stack; skip the stack's file and code lines.
     for line in lines:
-        if any(word in line for word in keywords):
+        if "RuntimeError: " in line:
+            return line.split("RuntimeError: ", 1)[1]
+    for line in lines:
+        if any(word in line for word in keywords) and not line.startswith("File "):
             return line
     return f"{type(error).__name__}: {lines[0] if lines else ''}"
 

@@ -115,6 +115,6 @@ def test_failed_run_exits_1_with_the_reason(capsys):
     )
     err = capsys.readouterr().err
     assert code == 1
-    assert err.startswith("lagjax: run failed:")
+    assert err.startswith("lagjax: error: run failed:")
     assert "Traceback" not in err
     assert len(err.strip().splitlines()) == 1
