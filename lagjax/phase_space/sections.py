@@ -65,42 +65,41 @@ def _crossed(before: jax.Array, after: jax.Array, direction: int) -> jax.Array:
 
 
 def _scan_for_crossings(flow, level, flat0, steps, dt, direction, max_crossings):
-    """The step index, end states and surface values of the first crossing steps.
+    """The step indices and start states of the first `max_crossings` crossing steps.
 
     The orbit is stepped in chunks of up to `_CHUNK` steps; the crossings of a chunk
     are written into the buffers by one scatter per chunk (a scatter every step
-    would dominate the cost of a batch of orbits).
+    would dominate the cost of a batch of orbits), and only the step's start
+    state is kept (its end is one step away).
     """
 
     def step(carry, _):
         y, before = carry
         moved = flow.advance(y, dt)
         after = level(moved)
-        return (moved, after), (y, moved, before, after)
+        hit = _crossed(before, after, direction)
+        return (moved, after), (y, hit)
 
     def chunk(carry, first_index, length):
-        y, before, count, indices, ends, values = carry
-        (y, before), (starts, stops, befores, afters) = jax.lax.scan(
+        y, before, count, indices, starts = carry
+        (y, before), (chunk_starts, hits) = jax.lax.scan(
             step, (y, before), None, length=length
         )
-        hits = _crossed(befores, afters, direction)
         slots = count + jnp.cumsum(hits) - 1
         # Misses and overflow go to slot max_crossings, which the scatter drops.
         slots = jnp.where(hits & (slots < max_crossings), slots, max_crossings)
         step_indices = first_index + jnp.arange(length, dtype=jnp.int32)
         indices = indices.at[slots].set(step_indices, mode="drop")
-        ends = ends.at[slots].set(jnp.stack([starts, stops], axis=1), mode="drop")
-        values = values.at[slots].set(jnp.stack([befores, afters], axis=1), mode="drop")
+        starts = starts.at[slots].set(chunk_starts, mode="drop")
         count = count + jnp.sum(hits, dtype=count.dtype)
-        return (y, before, count, indices, ends, values)
+        return (y, before, count, indices, starts)
 
     carry = (
         flat0,
         level(flat0),
         jnp.zeros((), dtype=jnp.int32),
         jnp.full(max_crossings, -1, dtype=jnp.int32),
-        jnp.zeros((max_crossings, 2, flat0.shape[0]), dtype=flat0.dtype),
-        jnp.ones((max_crossings, 2), dtype=flat0.dtype),
+        jnp.zeros((max_crossings, flat0.shape[0]), dtype=flat0.dtype),
     )
     length = min(_CHUNK, steps)
     whole, remainder = divmod(steps, length)
@@ -148,9 +147,12 @@ def _one_orbit(flow, flat0, surface, steps, dt, direction, max_crossings):
     def level(y):
         return surface(*flow.canonical(y))
 
-    count, indices, ends, values = _scan_for_crossings(
+    count, indices, starts = _scan_for_crossings(
         flow, level, flat0, steps, dt, direction, max_crossings
     )
+    stops = jax.vmap(lambda y: flow.advance(y, dt))(starts)
+    ends = jnp.stack([starts, stops], axis=1)
+    values = jax.vmap(jax.vmap(level))(ends)
     # Start from the end of the step nearer the surface: Hénon's step is shortest.
     nearer = jnp.argmin(jnp.abs(values), axis=1)
     rows = jnp.arange(max_crossings)
