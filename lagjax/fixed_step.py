@@ -61,12 +61,14 @@ def _step_function(terms, solver, t0, dt, args, dtype, last_step=None, t1=None):
         start = (t0 + k * dt).astype(dtype)
         end = t0 + (k + 1) * dt
         if last_step is not None:
-            end = jnp.where(k == last_step, t1, end)
+            end = jnp.where(k == last_step, t1, end)  # pyright: ignore[reportArgumentType]
         y_next, _, _, solver_state, step_result = solver.step(
             terms, start, end.astype(dtype), y, args, solver_state, False
         )
         step_result = diffrax.RESULTS.where(
-            _is_finite(y_next), step_result, diffrax.RESULTS.nonfinite
+            _is_finite(y_next),
+            step_result,
+            diffrax.RESULTS.nonfinite,  # pyright: ignore[reportArgumentType]
         )
         result = diffrax.RESULTS.where(
             result == diffrax.RESULTS.successful, step_result, result
@@ -105,7 +107,7 @@ def integrate_fixed_steps(
     y0: Any,
     args: Any,
     dtype: Any = float,
-) -> tuple[Any, Any, int]:
+) -> tuple[Any, Any, Any]:
     """Take fixed steps from t0 to t1; return `(y1, result, steps_taken)`.
 
     `result` is the first unsuccessful diffrax `RESULTS` of any step (e.g. a failed
@@ -156,7 +158,7 @@ def integrate_fixed_steps_saving(
     y0: Any,
     args: Any,
     dtype: Any = float,
-) -> tuple[Any, Any, int]:
+) -> tuple[Any, Any, Any, Any]:
     """Fixed steps with the state saved on the step grid:
     `(ys, result, steps_taken, saved)`.
 

@@ -36,6 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from .dense_output import DenseSolution, UserState, event_in_user_state
 from .divergence import DIVERGENCE_MESSAGE, diverged, energy_drift
 from .fixed_step import (
     fixed_step_count,
@@ -44,7 +45,9 @@ from .fixed_step import (
     uniform_grid_saves,
 )
 from .flat_state import flattened
+from .hermite import HermiteDenseOutput, needs_hermite
 from .precision import cast_floats, working_dtype
+from .scenes.base import AbstractScene
 from .step_grid import grid_step
 from .system import AbstractSystem
 from .trajectory import Trajectory
@@ -82,7 +85,9 @@ def _with_implicit_tolerances(
     )
 
 
-def _stepping(solver, t0, t1, dt, rtol, atol):
+def _stepping(solver, t0, t1, dt, rtol, atol, controller=None):
+    if controller is not None:
+        return _checked_controller(solver, controller, dt), dt
     if dt is not None:
         return diffrax.ConstantStepSize(), dt
     if not isinstance(solver, diffrax.AbstractAdaptiveSolver):
@@ -91,6 +96,52 @@ def _stepping(solver, t0, t1, dt, rtol, atol):
             "step: pass dt."
         )
     return diffrax.PIDController(rtol=rtol, atol=atol), None
+
+
+def _checked_controller(solver, controller, dt):
+    """The caller's step-size controller, refused where it cannot work."""
+    if not isinstance(controller, diffrax.AbstractStepSizeController):
+        raise TypeError(
+            "stepsize_controller must be a diffrax step-size controller "
+            "(diffrax.PIDController, ConstantStepSize, StepTo, …), got "
+            f"{type(controller).__name__}"
+        )
+    adaptive = isinstance(controller, diffrax.AbstractAdaptiveStepSizeController)
+    if adaptive and not isinstance(solver, diffrax.AbstractAdaptiveSolver):
+        raise ValueError(
+            f"{type(controller).__name__} adapts the step to an error estimate, but "
+            f"{type(solver).__name__} makes none: pass dt (fixed steps), "
+            "diffrax.StepTo(ts=...), or an adaptive solver (Tsit5, Dopri8, Kvaerno5)"
+        )
+    if isinstance(controller, diffrax.StepTo) and dt is not None:
+        raise ValueError(
+            "diffrax.StepTo takes its steps from its own ts: leave dt unset (None)"
+        )
+    return controller
+
+
+def _defaults(system, t0, t1, dt, solver, controller):
+    """`(t1, dt)` with what the caller left out filled in.
+
+    t1 = 10 for a plain system. A scene supplies its own span, and its own step
+    unless the caller asked for adaptive stepping (an adaptive solver or a step-size
+    controller): `simulate(scene, scene.initial_state())` is then the scene's
+    default run — its `default_solver(default_dt)` at its `default_dt` — as the
+    command line does it.
+    """
+    if not isinstance(system, AbstractScene):
+        return (10.0 if t1 is None else t1), dt
+    if t1 is None:
+        t1 = type(system).default_t1
+    adaptive = controller is not None or isinstance(
+        solver, diffrax.AbstractAdaptiveSolver
+    )
+    if dt is None and not adaptive:
+        dt = type(system).default_dt
+        ends = [_as_python_number(x) for x in (t0, t1)]
+        if all(isinstance(x, (int, float)) for x in ends) and ends[1] < ends[0]:
+            dt = -dt  # a backward run steps backward
+    return t1, dt
 
 
 def _as_python_number(x: Any) -> Any:
@@ -129,7 +180,7 @@ def simulate(
     system: System,
     y0: tuple[Any, Any],
     t0: float = 0.0,
-    t1: float = 10.0,
+    t1: float | None = None,
     dt: float | None = None,
     solver: diffrax.AbstractSolver | None = None,
     ts: Any = None,
@@ -142,6 +193,10 @@ def simulate(
     saveat: diffrax.SaveAt | None = None,
     adjoint: diffrax.AbstractAdjoint | None = None,
     throw: bool = True,
+    dense: bool = False,
+    event: diffrax.Event | None = None,
+    stepsize_controller: diffrax.AbstractStepSizeController | None = None,
+    progress_meter: diffrax.AbstractProgressMeter | None = None,
 ) -> Trajectory:
     """Integrate `system` from `y0` over [t0, t1].
 
@@ -151,7 +206,10 @@ def simulate(
       (`lagjax.scenes`), whose parameters are then passed as `args` unless `args`
       is given.
     - `y0`: `(q0, qdot0)` for a Lagrangian, `(q0, p0)` for a Hamiltonian.
-    - `dt`: fixed step; None for adaptive stepping with `rtol`, `atol`.
+    - `t1`: end time; default 10, or a scene's `default_t1`.
+    - `dt`: fixed step; None for adaptive stepping with `rtol`, `atol` — except
+      for a scene run by its default (or another fixed-step) solver, which then
+      steps by the scene's `default_dt`.
     - `solver`: any diffrax solver or lagjax solver; None picks one by structure
       (the system's `default_solver`) and records it in `stats["solver"]`.
     - `ts`: times to save at; default only the final state. `saveat` overrides.
@@ -159,6 +217,20 @@ def simulate(
     - `progress`: show diffrax's text progress meter.
     - `adjoint`: diffrax adjoint; pass `diffrax.ForwardMode()` to use `jax.jvp` /
       `jax.jacfwd` through the solve (reverse mode works with the default).
+    - `dense`: keep the continuous extension: `traj.evaluate(t)` gives the state
+      at any t of the span (`saveat=diffrax.SaveAt(dense=True)` does too).
+      Fixed-step lagjax solvers get a Hermite extension of their order up to 4
+      (6 for orders above 4; `lagjax.hermite`), used for `ts` off the step grid
+      and events too.
+    - `event`: a `diffrax.Event`; its `cond_fn(t, y, args, **kwargs)` sees `y` in
+      `y0`'s convention. The run ends at the first event, located on the dense
+      output (Newton's method when the event names no root finder);
+      `traj.result` is then `RESULTS.event_occurred` and
+      `traj.stats["event_mask"]` says which condition fired.
+    - `stepsize_controller`: any diffrax controller (`PIDController`, `StepTo`,
+      `ConstantStepSize`); it replaces `rtol`/`atol`. An adaptive one needs a
+      solver with an error estimate.
+    - `progress_meter`: any diffrax progress meter (replaces `progress`).
     - `throw`: raise on failure (max_steps reached, failed implicit solve, non-finite
       state). With False the trajectory up to the failure is returned and
       `result`/`stats["finite"]` say what happened; on the fixed-step path the
@@ -168,7 +240,10 @@ def simulate(
       (`lagjax.divergence`) is a failure too: `RESULTS.nonlinear_divergence`, and
       `stats["energy_drift"]` holds the measured ratio.
     """
+    t1, dt = _defaults(system, t0, t1, dt, solver, stepsize_controller)
     y0 = check_simulate_inputs(system, y0, t0, t1, dt, solver, ts, args, max_steps)
+    if progress and progress_meter is not None:
+        raise ValueError("pass progress=True or progress_meter, not both")
     t0, t1, dt = (_as_python_number(x) for x in (t0, t1, dt))
     _check_times(t0, t1, dt)
     if not isinstance(system, AbstractSystem):
@@ -194,12 +269,20 @@ def simulate(
     # One vector is what diffrax's loops run fastest (lagjax.flat_state).
     start = state0
     terms, state0, flat = flattened(terms, state0, saveat)
-    if dt is not None:
+    if dt is not None or not isinstance(
+        stepsize_controller, (diffrax.AbstractAdaptiveStepSizeController, type(None))
+    ):
         solver = _with_implicit_tolerances(solver, rtol, atol)
+    user_state = UserState.of(flat, integrated, system)
+    if event is not None:
+        event = event_in_user_state(event, user_state, dtype)
     run = _Run(t0, t1, dt, ts, rtol, atol, max_steps, progress, saveat, adjoint,
-               throw, dtype)  # fmt: skip
+               throw, dtype, dense, event, stepsize_controller,
+               progress_meter)  # fmt: skip
     integrate = _integrate_scan if run.fits_scan() else _diffeqsolve
-    saved_ts, ys, stats, result = integrate(terms, solver, state0, args, run)
+    saved_ts, ys, stats, result, interpolation = integrate(
+        terms, solver, state0, args, run
+    )
     if flat is not None:
         ys = flat.unravel(ys)
     finite = _all_saved_states_finite(saved_ts, ys)
@@ -213,7 +296,7 @@ def simulate(
         drift = energy_drift(integrated, start, t0, saved_ts, ys, args)
         result = diffrax.RESULTS.where(
             diverged(drift) & (result == diffrax.RESULTS.successful),
-            diffrax.RESULTS.nonlinear_divergence,
+            diffrax.RESULTS.nonlinear_divergence,  # pyright: ignore[reportArgumentType]
             result,
         )
         if throw:
@@ -227,6 +310,9 @@ def simulate(
         run_stats=stats,
         result=result,
         solver_name=type(solver).__name__,
+        dense_output=None
+        if interpolation is None
+        else DenseSolution(interpolation, user_state, args),
     )
 
 
@@ -268,16 +354,25 @@ class _Run(NamedTuple):
     adjoint: diffrax.AbstractAdjoint | None
     throw: bool
     dtype: Any
+    dense: bool = False
+    event: diffrax.Event | None = None
+    controller: diffrax.AbstractStepSizeController | None = None
+    progress_meter: diffrax.AbstractProgressMeter | None = None
 
     def fits_scan(self) -> bool:
-        """Fixed steps, default adjoint, no progress meter, and only the final state
-        or states on a uniform subgrid of the steps saved: the plain-scan path."""
+        """Fixed steps, default adjoint, no progress meter, no dense output or
+        event, and only the final state or states on a uniform subgrid of the steps
+        saved: the plain-scan path."""
         plain = (
             self.dt is not None
             and self.saveat is None
             and self.adjoint is None
             and not self.progress
             and self.max_steps is None
+            and not self.dense
+            and self.event is None
+            and self.controller is None
+            and self.progress_meter is None
             and all(isinstance(x, (int, float)) for x in (self.t0, self.t1, self.dt))
         )
         return plain and (self.ts is None or self.save_grid() is not None)
@@ -319,8 +414,10 @@ def _integrate_scan(terms, solver, state0, args, run: _Run):
         ys = jax.tree_util.tree_map(lambda x: jnp.asarray(x)[None], y1)
     else:
         step = math.copysign(abs(step), run.t1 - run.t0)
+        grid = run.save_grid()
+        assert grid is not None  # fits_scan() checked it
         ys, result, steps, saved = integrate_fixed_steps_saving(
-            terms, solver, run.t0, step, run.save_grid(), state0, args, run.dtype
+            terms, solver, run.t0, step, grid, state0, args, run.dtype
         )
         saved_ts = jnp.where(saved, run.ts, jnp.inf)
         ys = jax.tree_util.tree_map(
@@ -334,22 +431,35 @@ def _integrate_scan(terms, solver, state0, args, run: _Run):
     stats = dict(
         num_steps=counts, num_accepted_steps=counts, num_rejected_steps=0 * counts
     )
-    return saved_ts, ys, stats, result
+    return saved_ts, ys, stats, result, None
 
 
 def _diffeqsolve(terms, solver, state0, args, run: _Run):
     """The general path: `diffrax.diffeqsolve` with saving, adjoints, adaptivity."""
     t0, t1, dt, ts, dtype = run.t0, run.t1, run.dt, run.ts, run.dtype
-    controller, dt0 = _stepping(solver, t0, t1, dt, run.rtol, run.atol)
+    controller, dt0 = _stepping(solver, t0, t1, dt, run.rtol, run.atol, run.controller)
     max_steps = run.max_steps
     if max_steps is None:
-        max_steps = _fixed_step_count(t0, t1, dt) or 100_000
+        fixed = run.controller is None or isinstance(
+            run.controller, diffrax.ConstantStepSize
+        )
+        max_steps = (fixed and _fixed_step_count(t0, t1, dt)) or 100_000
     # diffrax promotes the state to the dtype of the times: give it the state's.
     t0, t1 = jnp.asarray(t0, dtype=dtype), jnp.asarray(t1, dtype=dtype)
     dt0 = None if dt0 is None else jnp.asarray(dt0, dtype=dtype)
     saveat = run.saveat
     if saveat is None:
         saveat = diffrax.SaveAt(ts=ts) if ts is not None else diffrax.SaveAt(t1=True)
+    if run.dense:
+        saveat = eqx.tree_at(lambda s: s.dense, saveat, True)
+    if needs_hermite(solver) and _interpolates(saveat, run.event):
+        solver = HermiteDenseOutput.for_solver(solver, terms)
+    if run.progress_meter is not None:
+        meter = run.progress_meter
+    else:
+        meter = (
+            diffrax.TextProgressMeter() if run.progress else diffrax.NoProgressMeter()
+        )
     solution = diffrax.diffeqsolve(
         terms,
         solver,
@@ -364,13 +474,25 @@ def _diffeqsolve(terms, solver, state0, args, run: _Run):
         adjoint=diffrax.RecursiveCheckpointAdjoint()
         if run.adjoint is None
         else run.adjoint,
-        progress_meter=diffrax.TextProgressMeter()
-        if run.progress
-        else diffrax.NoProgressMeter(),
+        progress_meter=meter,
+        event=run.event,
         throw=run.throw,
     )
     if solution.ts is None or solution.ys is None:
         raise ValueError("saveat must save at least one state (t0, t1, ts or steps)")
     # Arrays only, so trajectories batch under vmap and jit.
-    stats = {key: jnp.asarray(value) for key, value in solution.stats.items()}
-    return solution.ts, solution.ys, stats, solution.result
+    stats: dict[str, Any] = {
+        key: jnp.asarray(value) for key, value in solution.stats.items()
+    }
+    if run.event is not None:
+        stats["event_mask"] = solution.event_mask
+    return solution.ts, solution.ys, stats, solution.result, solution.interpolation
+
+
+def _interpolates(saveat: diffrax.SaveAt, event: diffrax.Event | None) -> bool:
+    """Whether a run reads states between steps: saves at given times, dense
+    output, or an event to locate."""
+    subs = jax.tree_util.tree_leaves(
+        saveat.subs, is_leaf=lambda x: isinstance(x, diffrax.SubSaveAt)
+    )
+    return saveat.dense or event is not None or any(s.ts is not None for s in subs)

@@ -25,7 +25,9 @@ class Trajectory(eqx.Module):
     the quaternion's rate.
 
     `stats` holds the solver used, diffrax's step counts and whether the state stayed
-    finite; `result` is diffrax's `RESULTS` value (successful or why not).
+    finite; `result` is diffrax's `RESULTS` value (successful or why not, or
+    `event_occurred` for a run an event ended). `dense_output` is the run's
+    continuous extension when `simulate(..., dense=True)` kept it (`evaluate`).
     """
 
     ts: jax.Array
@@ -35,6 +37,22 @@ class Trajectory(eqx.Module):
     run_stats: dict[str, Any]
     result: diffrax.RESULTS
     solver_name: str = eqx.field(static=True)
+    dense_output: Any = None
+
+    def evaluate(self, t: Any) -> tuple[Any, Any]:
+        """The state at time(s) `t` of the span, in `y0`'s convention: (q, q̇) for a
+        Lagrangian, (q, p) for a Hamiltonian, whatever state was integrated.
+
+        Needs `simulate(..., dense=True)` (or `saveat=diffrax.SaveAt(dense=True)`);
+        between steps of a fixed-step solver it is the Hermite extension of
+        `lagjax.hermite`. An array `t` gives arrays with a leading time axis.
+        """
+        if self.dense_output is None:
+            raise ValueError(
+                "this trajectory kept no dense output: run simulate(..., dense=True) "
+                "to evaluate it between saved times"
+            )
+        return self.dense_output.evaluate(t)
 
     @property
     def stats(self) -> dict[str, Any]:
