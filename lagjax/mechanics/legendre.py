@@ -37,12 +37,20 @@ from typing import Any
 
 import equinox as eqx
 import jax
+import jax.extend as jex
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
 from lagjax.precision import reachable_tolerance
 
-from .linalg import raise_if_singular, solve_dense
+from .euler_lagrange import SCALAR_COORDINATE_LIMIT, partial_derivative
+from .linalg import (
+    UNROLLED_SOLVE_LIMIT,
+    singular_message_for,
+    solve_dense,
+    solve_unrolled,
+)
+from .scalarize import scalar_argument_function
 
 _NEWTON_RTOL = 1e-13
 _NEWTON_ATOL = 1e-13
@@ -58,25 +66,46 @@ def invert_gradient(
     *,
     quadratic: bool,
     what: str,
+    check: bool | str = True,
 ) -> Any:
     """Solve ∇function(x) = target for x (x has the structure of `target`).
 
     `what` names the Hessian in the error raised when it is singular. A
     non-quadratic `function` that the damped Newton iteration cannot invert (no
     solution, or not convex there) raises an error naming the cause.
+
+    A function that is quadratic — declared (`quadratic`) or found so by reading
+    its program (`is_at_most_quadratic`) — is inverted by one linear solve, in
+    scalar arithmetic for few variables. `check="nan"` returns NaN instead of
+    raising (one fused select instead of a run-time branch per call, for loops
+    that check their state at the end, as `Lagrangian.acceleration` does).
     """
     target_flat, unravel = ravel_pytree(target)
+    start = jnp.zeros_like(target_flat)
+
+    def flat_function(x_flat):
+        return function(unravel(x_flat))
+
+    def verdict(x, failed, message):
+        if check == "nan":
+            return jnp.where(failed, jnp.nan, x)
+        return eqx.error_if(x, failed, message) if check else x
+
+    quadratic = quadratic or is_at_most_quadratic(flat_function, start)
+    singular_message = singular_message_for(what)
+    if quadratic and target_flat.shape[0] <= SCALAR_COORDINATE_LIMIT:
+        solution, singular = _quadratic_inverse_in_scalars(flat_function, target_flat)
+        return unravel(verdict(solution, singular, singular_message))
 
     def residual(x_flat, _):
         gradient = jax.grad(function)(unravel(x_flat))
         return ravel_pytree(gradient)[0] - target_flat
 
-    start = jnp.zeros_like(target_flat)
     hessian = jax.jacfwd(residual)(start, None)
     step, singular = solve_dense(hessian, residual(start, None))
     if quadratic:
-        return unravel(raise_if_singular(start - step, singular, what))
-    start = raise_if_singular(start, singular, what)
+        return unravel(verdict(start - step, singular, singular_message))
+    start = verdict(start, singular, singular_message)
     merit = lambda x: function(unravel(x)) - jnp.dot(target_flat, x)
     near = _damped_newton(merit, residual, start)
     # One more Newton step, differentiable: from the converged (stop_gradient)
@@ -84,8 +113,39 @@ def invert_gradient(
     step, singular = solve_dense(jax.jacfwd(residual)(near, None), residual(near, None))
     size = jax.lax.stop_gradient(jnp.max(jnp.abs(step)))
     converged = ~singular & (size <= _step_tolerance(near))
-    solution = eqx.error_if(near - step, ~converged, _no_inverse_message(what))
-    return unravel(solution)
+    return unravel(verdict(near - step, ~converged, _no_inverse_message(what)))
+
+
+def _quadratic_inverse_in_scalars(
+    function: Callable[[jax.Array], jax.Array], target: jax.Array
+) -> tuple[jax.Array, jax.Array]:
+    """x = −H⁻¹(∇f(0) − p) for a quadratic f of few variables: `(x, singular)`.
+
+    The one Newton step from zero of the general route, with every derivative a
+    scalar forward-mode pass and an unrolled solve for n ≤ 3 (as in
+    `euler_lagrange`): inside an implicit stage iteration the step then stays one
+    fused kernel instead of an LU call per evaluation.
+    """
+    n = target.shape[0]
+    start = jnp.zeros_like(target)
+    of_scalars = scalar_argument_function(function, start)
+    zero = [start[i] for i in range(n)]
+    gradient = [partial_derivative(of_scalars, i) for i in range(n)]
+    residual = [gradient[i](*zero) - target[i] for i in range(n)]
+    # Upper triangle only (H is symmetric), mirrored for the dense solve.
+    upper = {
+        (i, j): partial_derivative(gradient[i], j)(*zero)
+        for i in range(n)
+        for j in range(i, n)
+    }
+    hessian = [[upper[min(i, j), max(i, j)] for j in range(n)] for i in range(n)]
+    if n <= UNROLLED_SOLVE_LIMIT:
+        step, singular = solve_unrolled(hessian, residual)
+        return start - jnp.stack(step), singular
+    step, singular = solve_dense(
+        jnp.stack([jnp.stack(row) for row in hessian]), jnp.stack(residual)
+    )
+    return start - step, singular
 
 
 def _step_tolerance(x: jax.Array, *, final: bool = True) -> jax.Array:
@@ -155,3 +215,95 @@ def tree_dot(x: Any, y: Any) -> jax.Array:
     return (
         jnp.asarray(sum(products[1:], start=products[0])) if products else jnp.zeros(())
     )
+
+
+# -- Is the function at most quadratic in its argument? ----------------------------
+# Read off the traced program: a bound on the polynomial degree of every
+# intermediate in x, propagated primitive by primitive. A bound (not the exact
+# degree) is all that is needed, and it errs on the safe side: any operation not
+# known to keep polynomials polynomial (cos, sqrt, abs, a branch on x, a loop) gives
+# an unbounded degree unless none of its inputs depends on x.
+
+_UNBOUNDED = 1_000_000
+# Linear in each operand: the degree is the largest of the operands'.
+_LINEAR = frozenset(
+    [
+        "add",
+        "sub",
+        "neg",
+        "add_any",
+        "convert_element_type",
+        "copy",
+        "copy_p",
+        "reshape",
+        "squeeze",
+        "broadcast_in_dim",
+        "transpose",
+        "slice",
+        "concatenate",
+        "reduce_sum",
+        "cumsum",
+        "rev",
+        "pad",
+        "stop_gradient",
+        "real",
+        "imag",
+        "conj",
+        "split",
+    ]
+)
+_PRODUCT = frozenset({"mul", "dot_general"})
+_CALLS = frozenset({"pjit", "jit", "closed_call", "core_call", "remat", "checkpoint"})
+# Operands after the first are indices/positions: only the first carries degree.
+_INDEXED = frozenset({"dynamic_slice", "gather", "select_and_gather_add"})
+
+
+def _equation_degrees(eqn: Any, degrees: list[int]) -> list[int]:
+    name = eqn.primitive.name
+    count = len(eqn.outvars)
+    if name in _CALLS or name in ("custom_jvp_call", "custom_vjp_call"):
+        closed = eqn.params.get("jaxpr", eqn.params.get("call_jaxpr"))
+        if closed is not None:
+            inner = getattr(closed, "jaxpr", closed)
+            return _jaxpr_degrees(inner, degrees)
+    if name in _LINEAR:
+        return [max(degrees, default=0)] * count
+    if name in _PRODUCT:
+        return [sum(degrees)] * count
+    if name == "integer_pow" and eqn.params["y"] >= 0:
+        return [degrees[0] * eqn.params["y"]] * count
+    if name == "square":
+        return [2 * degrees[0]] * count
+    if name == "div" and degrees[1] == 0:
+        return [degrees[0]] * count
+    if name == "select_n" and degrees[0] == 0:
+        return [max(degrees[1:])] * count
+    if name in _INDEXED and max(degrees[1:], default=0) == 0:
+        return [degrees[0]] * count
+    # Anything else is polynomial only when it does not depend on x at all.
+    return [0 if max(degrees, default=0) == 0 else _UNBOUNDED] * count
+
+
+def _jaxpr_degrees(jaxpr: Any, input_degrees: list[int]) -> list[int]:
+    env = dict(zip(jaxpr.invars, input_degrees))
+
+    def degree(atom):
+        # Literals and the closed-over constants do not depend on x: degree 0.
+        return 0 if isinstance(atom, jex.core.Literal) else env.get(atom, 0)
+
+    for eqn in jaxpr.eqns:
+        results = _equation_degrees(eqn, [degree(v) for v in eqn.invars])
+        env.update(zip(eqn.outvars, (min(d, _UNBOUNDED) for d in results)))
+    return [degree(v) for v in jaxpr.outvars]
+
+
+def is_at_most_quadratic(function: Callable[[jax.Array], jax.Array], x: Any) -> bool:
+    """Whether `function(x)` is provably a polynomial of degree ≤ 2 in x.
+
+    False means "not proven" (e.g. `jnp.sqrt(1 - x @ x)`, or `x**2` written as
+    `jnp.power(x, 2.0)`); the caller then takes the general route, which gives the
+    same result for a quadratic function, only slower.
+    """
+    closed = jax.make_jaxpr(function)(x)
+    (degree,) = _jaxpr_degrees(closed.jaxpr, [1] * len(closed.jaxpr.invars))
+    return degree <= 2

@@ -96,12 +96,15 @@ def solve_dense(m: jax.Array, rhs: jax.Array) -> tuple[jax.Array, jax.Array]:
     return x, singular
 
 
-def raise_if_singular(x, singular: jax.Array, what: str):
-    """Attach a run-time error to `x` when `singular` is true (works inside jit)."""
-    return eqx.error_if(
-        x,
-        singular,
+def singular_message_for(what: str) -> str:
+    """The error message for a singular matrix described by `what`."""
+    return (
         f"{what} is singular at this state, so it cannot be inverted. Is the "
         "function degenerate (e.g. L linear in q̇), or is the state at a coordinate "
-        "singularity (e.g. Euler-angle gimbal lock)?",
+        "singularity (e.g. Euler-angle gimbal lock)?"
     )
+
+
+def raise_if_singular(x, singular: jax.Array, what: str):
+    """Attach a run-time error to `x` when `singular` is true (works inside jit)."""
+    return eqx.error_if(x, singular, singular_message_for(what))
