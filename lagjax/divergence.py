@@ -12,7 +12,8 @@ added to the step — by
 $$ \max_k |E(t_k) - E_0| \le 10^3 \left(|E_0| + |p_0\cdot\dot q_0|\right), $$
 
 over the saved states (the final one at least), where $|p_0\cdot\dot q_0|$ (twice
-the kinetic energy for a quadratic one) sets the scale when $E_0 \approx 0$. It
+the kinetic energy for a quadratic one) sets the scale when $E_0 \approx 0$ (it is
+left out where p and q̇ are not paired, as for a rigid body's quaternion). It
 applies only when the system conserves energy: no generalized forces,
 dissipation or constraints (`AbstractSystem.conserves_energy_if_autonomous`), and
 $\partial E/\partial t = 0$ at every saved state (autodiff gives exactly zero for
@@ -44,9 +45,7 @@ def energy_drift(
         return jnp.asarray(jnp.nan)
     q0, second0 = state0
     energy0 = system.state_energy(q0, second0, t0, args)
-    velocity0 = system.state_velocity(q0, second0, t0, args)
-    momentum0 = system.state_momentum(q0, second0, t0, args)
-    scale = jnp.abs(energy0) + jnp.abs(tree_dot(momentum0, velocity0))
+    scale = jnp.abs(energy0) + jnp.abs(_action_rate(system, q0, second0, t0, args))
     scale = jnp.maximum(scale, jnp.finfo(jnp.result_type(scale)).tiny)
 
     def energy_and_rate(q, second, t):
@@ -59,6 +58,17 @@ def energy_drift(
     autonomous = jnp.all(jnp.where(used, rates == 0, True))
     drift = jnp.max(jnp.where(used, jnp.abs(energies - energy0), 0.0)) / scale
     return jnp.where(autonomous, drift, jnp.nan)
+
+
+def _action_rate(system, q, second, t, args) -> jax.Array:
+    """p·q̇ at the state, or 0 where p and q̇ are not paired coordinates (a rigid
+    body's momentum has 3 components, its quaternion rate 4)."""
+    velocity = system.state_velocity(q, second, t, args)
+    momentum = system.state_momentum(q, second, t, args)
+    shapes = jax.tree_util.tree_map(jnp.shape, (velocity, momentum))
+    if shapes[0] != shapes[1]:
+        return jnp.zeros(())
+    return tree_dot(momentum, velocity)
 
 
 def diverged(drift: jax.Array) -> jax.Array:
