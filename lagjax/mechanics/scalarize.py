@@ -160,7 +160,9 @@ def _reduce(operand: np.ndarray, axes: Sequence[int], combine: Callable) -> np.n
     out_shape = moved.shape[: len(kept)]
     out = np.empty(out_shape, dtype=object)
     for index in np.ndindex(*out_shape):
-        out[index] = _fold(moved[index], combine)
+        # `...` keeps a 0-d array when no axis is reduced (jnp.sum of a scalar):
+        # plain indexing would hand _fold the bare element.
+        out[index] = _fold(moved[(*index, ...)], combine)
     return out
 
 
