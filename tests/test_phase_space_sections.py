@@ -28,7 +28,7 @@ def plane_x(q, p):
     return q[0]
 
 
-def _oscillator_section(direction=+1, max_crossings=10):
+def _oscillator_section(direction=+1, max_crossings=5):
     return lj.poincare_section(
         OSCILLATORS, STATES, 40.0, plane_x, direction=direction, dt=0.01,
         solver=SOLVER, max_crossings=max_crossings,
@@ -37,39 +37,33 @@ def _oscillator_section(direction=+1, max_crossings=10):
 
 def test_crossings_lie_on_the_invariant_ellipse_at_the_closed_form_times():
     section = _oscillator_section()
+    # 7 crossings before t = 40; the first 5 are stored, all are counted.
     np.testing.assert_array_equal(section.count, [7, 7])
-    exact = np.tile((np.pi / 2 + 2 * np.pi * np.arange(7)) / OMEGA_X, (2, 1))
+    assert section.ts.shape == (2, 5)
+    exact = np.tile((np.pi / 2 + 2 * np.pi * np.arange(5)) / OMEGA_X, (2, 1))
     # Yoshida4 at h = 0.01 runs the oscillator at a frequency off by ~7e-10
     # (O(h⁴)): the located times carry that phase error, growing with t, and no more.
-    np.testing.assert_allclose(section.ts[:, :7], exact, rtol=1e-9, atol=0)
-    assert np.all(np.isnan(section.ts[:, 7:])) and np.all(np.isnan(section.q[:, 7:]))
-    stored_q, stored_p = section.q[:, :7], section.p[:, :7]
+    np.testing.assert_allclose(section.ts, exact, rtol=1e-9, atol=0)
     # Hénon's step lands on the surface to round-off, not to the step's accuracy.
-    assert np.max(np.abs(stored_q[..., 0])) < 1e-14
-    energy_y = 0.5 * (stored_p[..., 1] ** 2 + OMEGA_Y**2 * stored_q[..., 1] ** 2)
+    assert np.max(np.abs(section.q[..., 0])) < 1e-14
+    energy_y = 0.5 * (section.p[..., 1] ** 2 + OMEGA_Y**2 * section.q[..., 1] ** 2)
     expected = 0.5 * (PY0**2 + OMEGA_Y**2 * Y0**2)
-    np.testing.assert_allclose(energy_y, np.tile(expected[:, None], 7), atol=1e-11)
+    np.testing.assert_allclose(energy_y, np.tile(expected[:, None], 5), atol=1e-11)
     np.testing.assert_allclose(
-        stored_p[..., 0], np.tile((OMEGA_X * AMPLITUDES)[:, None], 7), atol=1e-11
+        section.p[..., 0], np.tile((OMEGA_X * AMPLITUDES)[:, None], 5), atol=1e-11
     )
 
 
-def test_direction_selects_the_crossings():
+def test_both_directions_alternate_and_pad_with_nan():
     both = _oscillator_section(direction=0, max_crossings=16)
-    down = _oscillator_section(direction=-1, max_crossings=16)
-    # Downward crossings at ω_x t = 3π/2 + 2πk, 6 of them before t = 40.
-    np.testing.assert_array_equal(down.count, [6, 6])
+    # Upward at ω_x t = π/2 + 2πk, downward at 3π/2 + 2πk: 13 before t = 40.
     np.testing.assert_array_equal(both.count, [13, 13])
-    assert np.all(down.p[:, :6, 0] < 0)
-    np.testing.assert_allclose(
-        down.ts[0, :6], (1.5 * np.pi + 2 * np.pi * np.arange(6)) / OMEGA_X, rtol=1e-9
-    )
-
-
-def test_more_crossings_than_stored_are_counted():
-    section = _oscillator_section(max_crossings=3)
-    np.testing.assert_array_equal(section.count, [7, 7])
-    assert section.ts.shape == (2, 3) and np.all(np.isfinite(section.ts))
+    exact = (0.5 * np.pi + np.pi * np.arange(13)) / OMEGA_X
+    np.testing.assert_allclose(both.ts[:, :13], np.tile(exact, (2, 1)), rtol=1e-9)
+    signs = np.sign(both.p[:, :13, 0])
+    np.testing.assert_array_equal(signs, np.tile((-1.0) ** np.arange(13), (2, 1)))
+    assert np.all(np.isnan(both.ts[:, 13:])) and np.all(np.isnan(both.q[:, 13:]))
+    assert np.all(np.isnan(both.p[:, 13:]))
 
 
 def test_lagrangian_pendulum_crosses_at_three_quarter_periods():
@@ -97,12 +91,12 @@ def test_plot_draws_every_stored_crossing():
     matplotlib.use("Agg")
     ax, section = plot_poincare_section(
         OSCILLATORS, STATES, 40.0, plane_x, dt=0.01, solver=SOLVER,
-        max_crossings=10, horizontal=lambda q, p: q[1], vertical=lambda q, p: p[1],
+        max_crossings=5, horizontal=lambda q, p: q[1], vertical=lambda q, p: p[1],
     )  # fmt: skip
     drawn = [np.asarray(collection.get_offsets()) for collection in ax.collections]
-    assert [len(points) for points in drawn] == [7, 7]  # one scatter per orbit
-    np.testing.assert_allclose(drawn[0][:, 0], section.q[0, :7, 1])
-    np.testing.assert_allclose(drawn[1][:, 1], section.p[1, :7, 1])
+    assert [len(points) for points in drawn] == [5, 5]  # one scatter per orbit
+    np.testing.assert_allclose(drawn[0][:, 0], section.q[0, :, 1])
+    np.testing.assert_allclose(drawn[1][:, 1], section.p[1, :, 1])
 
 
 def test_bad_input_is_named():
