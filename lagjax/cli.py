@@ -157,7 +157,10 @@ def _options(scene, args) -> tuple[float, float | None, Any]:
     try:
         check_times(0.0, t1, dt)
     except ValueError as error:
-        raise UsageError(str(error).replace("dt = ", "--dt ", 1)) from None
+        message = str(error).replace("dt = ", "--dt ", 1)
+        raise UsageError(
+            message.replace(", or dt=None for adaptive stepping", "")
+        ) from None
     if args.solver is not None and args.solver not in SOLVERS:
         raise UsageError(
             f"unknown solver {args.solver!r}; choose from {', '.join(SOLVERS)}"
