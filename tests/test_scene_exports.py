@@ -193,8 +193,8 @@ def test_traced_parameters_are_not_checked_and_still_sweep():
     gravities = jnp.array([9.81, 1.62, 24.8])
     batch = jax.vmap(lambda g: scenes.SimplePendulum(gravity=g))(gravities)
     assert batch.gravity.shape == (3,) and batch.gravity.dtype == jnp.float64
-    periods = jax.vmap(lambda s: s.small_amplitude_frequency())(batch)
-    assert np.allclose(periods, np.sqrt(gravities))  # ω₀ = √(g/l), l = 1
+    frequencies = jax.vmap(lambda s: s.small_amplitude_frequency())(batch)
+    assert np.allclose(frequencies, np.sqrt(gravities))  # ω₀ = √(g/l), l = 1
     # A bad value inside a trace is not caught at construction (documented).
     traced = jax.jit(lambda m: scenes.HarmonicOscillator(mass=m).frequency())
     assert np.isnan(traced(-1.0))
