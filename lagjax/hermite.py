@@ -136,30 +136,37 @@ class HermiteDenseOutput(diffrax.AbstractWrappedSolver):
         return self.solver.error_order(terms)
 
     def init(self, terms, t0, t1, y0, args):
-        return self.solver.init(terms, t0, t1, y0, args)
+        """The wrapped solver's state, and the derivatives at the start (carried
+        from each step's end to the next step's start: first-same-as-last)."""
+        inner = self.solver.init(terms, t0, t1, y0, args)
+        return inner, self._derivatives(terms, t0, y0, args)
 
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
-        y1, error, _, solver_state, result = self.solver.step(
-            terms, t0, t1, y0, args, solver_state, made_jump
+        inner, start = solver_state
+        if made_jump is not False:
+            # After a jump the carried derivatives belong to the old vector field.
+            start = jax.lax.cond(
+                made_jump, lambda: self._derivatives(terms, t0, y0, args), lambda: start
+            )
+        y1, error, _, inner, result = self.solver.step(
+            terms, t0, t1, y0, args, inner, made_jump
         )
+        end = self._derivatives(terms, t1, y1, args)
         h = t1 - t0
-        dense_info = dict(y0=y0, y1=y1)
-        for end, (t, y) in (("0", (t0, y0)), ("1", (t1, y1))):
-            rate, acceleration = self._derivatives(terms, t, y, args)
-            dense_info["k" + end] = _scaled(rate, h)
-            if self.quintic:
-                dense_info["m" + end] = _scaled(acceleration, h * h)
-        return y1, error, dense_info, solver_state, result
+        dense_info = dict(y0=y0, y1=y1, k0=_scaled(start[0], h), k1=_scaled(end[0], h))
+        if self.quintic:
+            dense_info.update(m0=_scaled(start[1], h * h), m1=_scaled(end[1], h * h))
+        return y1, error, dense_info, (inner, end), result
 
     def _derivatives(self, terms, t, y, args) -> tuple[Any, Any]:
         """(ẏ, ÿ) at (t, y); ÿ = ∂f/∂t + f'(y)·f by one Jacobian–vector product
-        (None for the cubic)."""
+        (empty for the cubic)."""
 
         def field(time, state):
             return self.solver.func(terms, time, state, args)
 
         if not self.quintic:
-            return field(t, y), None
+            return field(t, y), ()
         rate = field(t, y)
         one = jnp.ones_like(jnp.asarray(t))
         _, acceleration = jax.jvp(field, (t, y), (one, rate))
