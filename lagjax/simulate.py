@@ -48,6 +48,7 @@ from .flat_state import flattened
 from .hermite import HermiteDenseOutput, needs_hermite
 from .precision import cast_floats, working_dtype
 from .scenes.base import AbstractScene
+from .solvers.implicit import stage_failure_message
 from .step_grid import grid_step
 from .system import AbstractSystem
 from .trajectory import Trajectory
@@ -290,7 +291,7 @@ def simulate(
     if throw:
         ys = eqx.error_if(ys, ~finite, _NON_FINITE_MESSAGE)
     stats["finite"] = finite
-    if run.fits_scan():
+    if run.dt is not None and run.saveat is None:
         # Fixed steps can outrun a method's stability limit with a finite state;
         # judged once, after the loop (lagjax.divergence).
         drift = energy_drift(integrated, start, t0, saved_ts, ys, args)
@@ -426,6 +427,11 @@ def _integrate_scan(terms, solver, state0, args, run: _Run):
         )
     if run.throw:
         ys = eqx.error_if(ys, result == diffrax.RESULTS.nonfinite, _NON_FINITE_MESSAGE)
+        # diffrax's text cannot say why a stage solve failed; the solver can.
+        stage_failed = (result == diffrax.RESULTS.nonlinear_max_steps_reached) | (
+            result == diffrax.RESULTS.nonlinear_divergence
+        )
+        ys = eqx.error_if(ys, stage_failed, stage_failure_message(solver))
         ys = result.error_if(ys, result != diffrax.RESULTS.successful)
     counts = jnp.asarray(steps)
     stats = dict(

@@ -100,7 +100,7 @@ def test_vmap_over_bodies_and_states():
 def test_bad_bodies_are_named():
     with pytest.raises(ValueError, match="three principal moments"):
         RigidBody(jnp.eye(3))
-    with pytest.raises(RuntimeError, match="must be positive"):
+    with pytest.raises(ValueError, match="must all be positive"):
         RigidBody(jnp.array([1.0, 0.0, 2.0]))
     with pytest.raises(ValueError, match="must return a scalar"):
         RigidBody(MOMENTS, lambda rotation: rotation[2]).potential_energy(Q0)

@@ -260,3 +260,41 @@ def constrained_motion(
 def raise_if_rank_deficient(x: Any, singular: jax.Array) -> Any:
     """Attach the rank-deficient-constraints run-time error to `x` (works in jit)."""
     return eqx.error_if(x, singular, _RANK_MESSAGE)
+
+
+# A start counts as on the constraints when its residuals are round-off of the
+# coordinates' and velocities' own size (the projection itself reaches ~1e-15).
+_START_TOLERANCE = 1e-9
+
+
+def refuse_start_off_constraints(
+    constraints: Constraints, q: Any, qdot: Any, t: Any, args: Any
+) -> tuple[Any, Any]:
+    """`(q, q̇)` unchanged if they satisfy the constraints, else a clear error.
+
+    Projecting a start that violates the constraints onto them without a word
+    changes the motion (a `CartesianPendulum` started 1.5× too long lost a third
+    of its energy that way). Checked when the values are concrete; under a trace
+    the error is attached at run time (`eqx.error_if`), once, before the loop.
+    """
+    scale_q = 1.0 + jnp.max(jnp.abs(ravel_pytree(q)[0]))
+    scale_v = 1.0 + jnp.max(jnp.abs(ravel_pytree(qdot)[0]))
+    position = jnp.max(jnp.abs(constraints.position_residual(q, t, args)), initial=0.0)
+    velocity = jnp.max(
+        jnp.abs(constraints.velocity_residual(q, qdot, t, args)), initial=0.0
+    )
+    violated = (position > _START_TOLERANCE * scale_q) | (
+        velocity > _START_TOLERANCE * scale_v
+    )
+    message = (
+        "The initial state violates the constraints: max |g(q0, t0)| = {}, max "
+        "|ġ or c(q0, q̇0, t0)| = {} (tolerance 1e-9 of the state's size). Start on "
+        "the constraint manifold, e.g. (q0, q̇0), _ = lagjax.solvers.projection."
+        "project_onto_constraints(lagrangian, q0, q̇0, t0, args) — the smallest "
+        "change in the kinetic metric — if a projection is what you want."
+    )
+    if not isinstance(violated, jax.core.Tracer):
+        if bool(violated):
+            raise ValueError(message.format(float(position), float(velocity)))
+        return q, qdot
+    return eqx.error_if((q, qdot), violated, message.format("(traced)", "(traced)"))

@@ -24,7 +24,11 @@ import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
 from ..system import AbstractSystem, is_partitioned
-from .constraints import Constraints, constrained_motion
+from .constraints import (
+    Constraints,
+    constrained_motion,
+    refuse_start_off_constraints,
+)
 from .euler_lagrange import euler_lagrange_acceleration
 from .functions import function_field
 from .legendre import tree_dot
@@ -291,6 +295,7 @@ class Lagrangian(AbstractSystem):
             return (q0, self.momentum(q0, qdot0, t0, args))
 
         if self.constraints is not None:
+            y0 = refuse_start_off_constraints(self.constraints, *y0, t0, args)
             if solver.term_structure is RattleTerm:
                 return RattleTerm(self), canonical_start(), self.to_hamiltonian()
             return ConstrainedLagrangianTerm(self), y0, self
