@@ -87,3 +87,30 @@ def test_singular_quadratic_inverse_raises_or_poisons(n):
         )
     )(jnp.ones(n))
     assert bool(jnp.all(jnp.isnan(poisoned)))
+
+
+def n_link_lagrangian(q, qd):
+    """n unit masses on unit rods, written vector-style with cumulative sums."""
+    vx, vy = jnp.cumsum(jnp.cos(q) * qd), jnp.cumsum(jnp.sin(q) * qd)
+    return 0.5 * jnp.sum(vx**2 + vy**2) + G * jnp.sum(jnp.cumsum(jnp.cos(q)))
+
+
+def n_link_acceleration(q, qd):
+    """Closed form: M_ij = (n − max(i, j)) cos(θ_i − θ_j) (0-based), and
+    M q̈ = −Σ_j (n − max(i, j)) sin(θ_i − θ_j) θ̇_j² − g (n − i) sin θ_i."""
+    n = q.shape[0]
+    index = np.arange(n)
+    weight = n - np.maximum(index[:, None], index[None, :])
+    difference = q[:, None] - q[None, :]
+    rhs = -(weight * jnp.sin(difference)) @ qd**2 - G * (n - index) * jnp.sin(q)
+    return jnp.linalg.solve(weight * jnp.cos(difference), rhs)
+
+
+@pytest.mark.parametrize("n", [4, 9])
+def test_n_link_pendulum_acceleration_matches_closed_form(n):
+    # n = 4: scalar formulation; n = 9: dense formulation.
+    q, qd = jnp.linspace(0.3, -1.1, n), jnp.linspace(-0.5, 0.8, n)
+    qddot = lj.Lagrangian(n_link_lagrangian).acceleration(q, qd)
+    np.testing.assert_allclose(
+        qddot, n_link_acceleration(q, qd), rtol=1e-11, atol=1e-11
+    )
