@@ -31,8 +31,9 @@ case "$cmd" in
         "$VENV/bin/python" -m lagjax.demo
         exec "$VENV/bin/lagjax" run foucault-pendulum "$@" ;;
     # Two pytest workers by default (the CI machine has 2 cores); LAGJAX_TEST_WORKERS=0
-    # runs in one process.
-    test) setup test; exec "$VENV/bin/python" -m pytest -n "${LAGJAX_TEST_WORKERS:-2}" "$@" ;;
+    # runs in one process. Whole files per worker: module fixtures (benchmark runs) and
+    # a file's jitted functions are built once, not once on each worker.
+    test) setup test; exec "$VENV/bin/python" -m pytest -n "${LAGJAX_TEST_WORKERS:-2}" --dist loadfile "$@" ;;
     bench) setup "test,bench"; exec "$VENV/bin/python" -m benchmarks.derivation_overhead "$@" ;;
     *) echo "usage: bash tasks.sh {demo|test|bench} [args...]" >&2; exit 2 ;;
 esac
