@@ -186,9 +186,10 @@ imported = time.perf_counter()
 if "{variant}" == "simulate":
     ys = lj.simulate(lag, (q0, qd0), 0.0, 10.0, solver=solver).ys
 elif "{variant}" == "derived":
-    ys = jax.jit(solve)(field(lambda q, qd: lag.acceleration(q, qd, check=False)))
+    derived = field(lambda q, qd: lag.acceleration(q, qd, check=False))
+    ys = jax.jit(lambda: solve(derived))()
 else:
-    ys = jax.jit(solve)(field(handwritten_acceleration))
+    ys = jax.jit(lambda: solve(field(handwritten_acceleration)))()
 jax.block_until_ready(ys)
 print(time.perf_counter() - imported)
 """
@@ -211,6 +212,8 @@ def first_call_rows(repeats: int) -> None:
                 output = subprocess.run(
                     [sys.executable, "-c", code], capture_output=True, text=True
                 )
+                if output.returncode:
+                    raise RuntimeError(output.stderr)
                 times[variant].append(float(output.stdout.split()[-1]))
         base = statistics.median(times["hand"])
         for variant, label in variants.items():
