@@ -8,6 +8,7 @@ import pytest
 
 import lagjax as lj
 from lagjax.scenes.central import KeplerCartesian
+from lagjax.scenes.pendulums import SimplePendulum
 
 OSCILLATOR = lj.SeparableHamiltonian(lambda p: 0.5 * p**2, lambda q: 0.5 * q**2)
 
@@ -85,3 +86,12 @@ def test_plain_systems_keep_t1_10_and_adaptive_stepping():
     assert float(run.ts[-1]) == 10.0
     assert run.stats["solver"] not in ("StormerVerlet", "Yoshida4")
     assert int(run.stats["num_steps"]) > 0
+
+
+def test_checks_refuse_a_trajectory_they_cannot_judge():
+    """The pendulum's period comes from zero crossings among the saves: a run that
+    saved only its final state is refused, not answered with NaN."""
+    scene = SimplePendulum()
+    final_only = lj.simulate(scene, scene.initial_state())
+    with pytest.raises(ValueError, match="cannot judge this trajectory"):
+        scene.checks(final_only)

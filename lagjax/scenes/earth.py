@@ -22,6 +22,7 @@ from jax.typing import ArrayLike
 
 from lagjax.mechanics.lagrangian import Lagrangian
 from lagjax.scenes.base import LATITUDE, AbstractScene, StateKind, parameter
+from lagjax.scenes.judging import measured
 from lagjax.scenes.rotating import rotating_kinetic_energy
 
 EARTH_RATE = 7.2921159e-5  # sidereal angular velocity of the Earth, rad/s
@@ -150,7 +151,12 @@ class FoucaultPendulum(AbstractScene):
         """Measured precession rate against −ω_E sin φ (to ~(a/l)², see the docstring)."""
         return {
             "precession rate": (
-                self.measured_precession_rate(trajectory),
+                measured(
+                    self.measured_precession_rate(trajectory),
+                    self,
+                    "the precession rate",
+                    "saves along the run to fit its slope",
+                ),
                 self.precession_rate(),
             )
         }

@@ -26,6 +26,7 @@ import jax.numpy as jnp
 from lagjax.mechanics.hamiltonian import SeparableHamiltonian
 from lagjax.mechanics.lagrangian import Lagrangian
 from lagjax.scenes.base import BELOW_THE_TOP, AbstractScene, StateKind, parameter
+from lagjax.scenes.judging import measured
 from lagjax.signals import zero_crossing_times
 from lagjax.special import complete_elliptic_k_from_complement
 
@@ -105,7 +106,15 @@ class SimplePendulum(AbstractScene):
         start_energy = self.system()(*self.initial_state(), 0.0, self)
         energy = trajectory.energy()
         return {
-            "period": (self.measured_period(trajectory), self.period()),
+            "period": (
+                measured(
+                    self.measured_period(trajectory),
+                    self,
+                    "the period",
+                    "saves over at least 3/4 of a period",
+                ),
+                self.period(),
+            ),
             "energy": (energy, start_energy * jnp.ones_like(energy)),
         }
 

@@ -38,6 +38,7 @@ from lagjax.rigid.quaternion import quaternion_to_matrix
 from lagjax.signals import zero_crossing_times
 
 from .base import AbstractScene, StateKind, parameter
+from .judging import measured
 
 
 def euler_rates_from_body_omega(angles: jax.Array, omega_body: jax.Array) -> jax.Array:
@@ -143,7 +144,15 @@ class TorqueFreeBody(AbstractScene):
         energy = 0.5 * jnp.sum(self.moments * omega**2, axis=-1)
         half_period = _intermediate_axis_half_period(trajectory, self.moments)
         return {
-            "half period": (half_period, 0.5 * self.period()),
+            "half period": (
+                measured(
+                    half_period,
+                    self,
+                    "the half period",
+                    "two sign changes of ω₂ among the saves (save over a period)",
+                ),
+                0.5 * self.period(),
+            ),
             "energy": (energy, jnp.full_like(energy, self.energy())),
             "angular momentum": (
                 space_momentum,
@@ -323,7 +332,12 @@ class EarthFreePrecession(AbstractScene):
         expected_momentum = self.body().angular_momentum_space()
         return {
             "wobble period (days)": (
-                2 * (second - first) / DAY,
+                measured(
+                    2 * (second - first) / DAY,
+                    self,
+                    "the wobble period",
+                    "saves over at least 3/4 of the wobble period",
+                ),
                 self.euler_period() / DAY,
             ),
             "wobble angle": (wobble, jnp.full_like(wobble, self.wobble)),
