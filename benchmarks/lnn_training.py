@@ -19,8 +19,9 @@ are timed with
 - `lagjax-dense` (diagnostic): lagjax's dense formulation (`_dense_system`, one
   Jacobian of the gradient and one JVP) with LU, which the library uses above
   `SCALAR_COORDINATE_LIMIT` coordinates;
-- `fused-hvp` (diagnostic): the least work a network-sized L needs, one gradient
-  and n + 1 Hessian-vector products batched in one forward-over-reverse pass.
+- `fused-hvp`: `lagjax.neural.network_acceleration`, the least work a network-sized
+  L needs: one gradient and n + 1 Hessian-vector products batched in one
+  forward-over-reverse pass.
 
 Targets are the double pendulum's exact accelerations (m = l = 1, g = 9.81) at
 random states. Compile time is reported apart; run time is the median of repeats,
@@ -50,6 +51,7 @@ import lagjax as lj  # noqa: E402
 from lagjax.demo import handwritten_acceleration  # noqa: E402
 from lagjax.mechanics.euler_lagrange import _dense_system  # noqa: E402
 from lagjax.mechanics.linalg import solve_dense  # noqa: E402
+from lagjax.neural import network_acceleration  # noqa: E402
 
 
 class LagrangianMLP(eqx.Module):
@@ -96,32 +98,12 @@ def lagjax_dense_acceleration(lagrangian, q, qdot):
     return solve_dense(mass, rhs)[0]
 
 
-def fused_hvp_acceleration(lagrangian, q, qdot):
-    """What a network-sized L needs: one gradient, n + 1 Hessian-vector products.
-
-    The gradient of L in (q, q̇) gives the force ∂L/∂q; its forward derivative along
-    (0, e_k) gives the mass matrix's columns and along (q̇, 0) the transport term
-    (∂²L/∂q̇∂q) q̇ — all n + 1 tangents in one batched forward-over-reverse pass.
-    """
-    n = q.shape[0]
-    gradient = jax.grad(lagrangian, argnums=(0, 1))
-    tangents_q = jnp.concatenate([jnp.zeros((n, n)), qdot[None]], axis=0)
-    tangents_v = jnp.concatenate([jnp.eye(n), jnp.zeros((1, n))], axis=0)
-
-    def along(dq, dv):
-        return jax.jvp(gradient, (q, qdot), (dq, dv))
-
-    (force, _), (_, second) = jax.vmap(along)(tangents_q, tangents_v)
-    mass, transport = second[:n], second[n]
-    return jnp.linalg.solve(mass, force[0] - transport)
-
-
 VARIANTS = {
     "cranmer": cranmer_acceleration,
     "lagjax": lagjax_acceleration,
     "dense-solve": dense_solve_acceleration,
     "lagjax-dense": lagjax_dense_acceleration,
-    "fused-hvp": fused_hvp_acceleration,
+    "fused-hvp": network_acceleration,
 }
 
 
