@@ -193,9 +193,9 @@ def test_simulate_scan_path_vmap_and_grad():
     # A batch of starts in one vmapped run (here: central differences) ...
     step = 1e-6
     shifts = jnp.concatenate([step * jnp.eye(3), -step * jnp.eye(3)])
-    spins = jax.jit(jax.vmap(spin_after))(OMEGA0 + shifts)
+    spins = jax.vmap(spin_after)(OMEGA0 + shifts)
     # ... and reverse mode through the steps and the autodiff torque inside them.
-    grad = jax.jit(jax.grad(spin_after))(OMEGA0)
+    grad = jax.grad(spin_after)(OMEGA0)
     assert np.allclose(grad, (spins[:3] - spins[3:]) / (2 * step), rtol=1e-6)
 
 
