@@ -20,13 +20,16 @@ fixed; without it the solver must be adaptive and `rtol`/`atol` control the erro
 Only the final state is saved unless `ts` (or `saveat`) asks for more. Fixed steps
 with only the final state saved, or `ts` on a uniform subgrid of the steps (and the
 default adjoint), run as plain `lax.scan`s over the solver's `step` (see
-`fixed_step.py`); everything else runs through `diffrax.diffeqsolve`.
+`fixed_step.py`); everything else runs through `diffrax.diffeqsolve`. A run that
+reads states between steps (`ts` off the grid, `dense=True`, an `event`) gives a
+fixed-step solver a Hermite continuous extension (`lagjax.hermite`) for that run
+only; `Trajectory.evaluate` and event conditions see `y0`'s convention
+(`lagjax.dense_output`).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from typing import Any, NamedTuple
 
 import diffrax
@@ -34,7 +37,6 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 
 from .dense_output import DenseSolution, UserState, event_in_user_state
 from .divergence import DIVERGENCE_MESSAGE, diverged, energy_drift
@@ -47,134 +49,21 @@ from .fixed_step import (
 from .flat_state import flattened
 from .hermite import HermiteDenseOutput, needs_hermite
 from .precision import cast_floats, working_dtype
-from .scenes.base import AbstractScene
 from .solvers.implicit import stage_failure_message
 from .step_grid import grid_step
+from .stepping import (
+    as_python_number,
+    check_span,
+    defaults,
+    fixed_step_count_or_none,
+    stepping,
+    with_implicit_tolerances,
+)
 from .system import AbstractSystem
 from .trajectory import Trajectory
 from .validation import check_simulate_inputs
 
 System = AbstractSystem
-
-
-def _with_implicit_tolerances(
-    solver: diffrax.AbstractSolver, rtol: float, atol: float
-) -> diffrax.AbstractSolver:
-    """A diffrax implicit solver whose unset Newton tolerances are `rtol`, `atol`.
-
-    diffrax's implicit solvers (Kvaerno5, …) take them from the adaptive step-size
-    controller by default; with a fixed step there is none, so simulate's own
-    tolerances stand in (the norm is then diffrax's RMS norm).
-    """
-    if not isinstance(solver, diffrax.AbstractImplicitSolver):
-        return solver
-    finder = solver.root_finder
-    fills = {"rtol": rtol, "atol": atol, "norm": optx.rms_norm}
-    # diffrax marks an unset tolerance with a sentinel object, not a number.
-    unset = [
-        name
-        for name in fills
-        if hasattr(finder, name)
-        and not isinstance(getattr(finder, name), (int, float, Callable))
-    ]
-    if not unset:
-        return solver
-    return eqx.tree_at(
-        lambda s: [getattr(s.root_finder, name) for name in unset],
-        solver,
-        [fills[name] for name in unset],
-    )
-
-
-def _stepping(solver, t0, t1, dt, rtol, atol, controller=None):
-    if controller is not None:
-        return _checked_controller(solver, controller, dt), dt
-    if dt is not None:
-        return diffrax.ConstantStepSize(), dt
-    if not isinstance(solver, diffrax.AbstractAdaptiveSolver):
-        raise ValueError(
-            f"{type(solver).__name__} has no error estimate, so it cannot choose its own "
-            "step: pass dt."
-        )
-    return diffrax.PIDController(rtol=rtol, atol=atol), None
-
-
-def _checked_controller(solver, controller, dt):
-    """The caller's step-size controller, refused where it cannot work."""
-    if not isinstance(controller, diffrax.AbstractStepSizeController):
-        raise TypeError(
-            "stepsize_controller must be a diffrax step-size controller "
-            "(diffrax.PIDController, ConstantStepSize, StepTo, …), got "
-            f"{type(controller).__name__}"
-        )
-    adaptive = isinstance(controller, diffrax.AbstractAdaptiveStepSizeController)
-    if adaptive and not isinstance(solver, diffrax.AbstractAdaptiveSolver):
-        raise ValueError(
-            f"{type(controller).__name__} adapts the step to an error estimate, but "
-            f"{type(solver).__name__} makes none: pass dt (fixed steps), "
-            "diffrax.StepTo(ts=...), or an adaptive solver (Tsit5, Dopri8, Kvaerno5)"
-        )
-    if isinstance(controller, diffrax.StepTo) and dt is not None:
-        raise ValueError(
-            "diffrax.StepTo takes its steps from its own ts: leave dt unset (None)"
-        )
-    return controller
-
-
-def _defaults(system, t0, t1, dt, solver, controller):
-    """`(t1, dt)` with what the caller left out filled in.
-
-    t1 = 10 for a plain system. A scene supplies its own span, and its own step
-    unless the caller asked for adaptive stepping (an adaptive solver or a step-size
-    controller): `simulate(scene, scene.initial_state())` is then the scene's
-    default run — its `default_solver(default_dt)` at its `default_dt` — as the
-    command line does it.
-    """
-    if not isinstance(system, AbstractScene):
-        return (10.0 if t1 is None else t1), dt
-    if t1 is None:
-        t1 = type(system).default_t1
-    adaptive = controller is not None or isinstance(
-        solver, diffrax.AbstractAdaptiveSolver
-    )
-    if dt is None and not adaptive:
-        dt = type(system).default_dt
-        ends = [_as_python_number(x) for x in (t0, t1)]
-        if all(isinstance(x, (int, float)) for x in ends) and ends[1] < ends[0]:
-            dt = -dt  # a backward run steps backward
-    return t1, dt
-
-
-def _as_python_number(x: Any) -> Any:
-    """A concrete NumPy/JAX scalar as a Python float (traced values are kept)."""
-    if isinstance(x, (np.generic, np.ndarray)) and np.ndim(x) == 0:
-        return float(x)
-    if isinstance(x, jax.Array) and x.ndim == 0:
-        try:
-            return float(x)
-        except jax.errors.ConcretizationTypeError:  # traced: keep it traced
-            return x
-    return x
-
-
-def _check_times(t0, t1, dt):
-    concrete = all(isinstance(x, (int, float)) for x in (t0, t1))
-    if concrete and t1 == t0:
-        raise ValueError(f"t1 must differ from t0, both are {t0}")
-    if dt is not None and isinstance(dt, (int, float)):
-        if dt == 0 or not math.isfinite(dt):
-            raise ValueError(f"dt must be a finite non-zero number, got {dt}")
-        if concrete and (t1 - t0) * dt < 0:
-            raise ValueError(
-                f"dt = {dt} points away from t1 = {t1} (t0 = {t0}); use dt of the same "
-                "sign as t1 - t0"
-            )
-
-
-def _fixed_step_count(t0, t1, dt) -> int | None:
-    if dt is None or not all(isinstance(x, (int, float)) for x in (t0, t1, dt)):
-        return None
-    return math.ceil(abs((t1 - t0) / dt) * (1 + 1e-12)) + 1
 
 
 def simulate(
@@ -241,12 +130,12 @@ def simulate(
       (`lagjax.divergence`) is a failure too: `RESULTS.nonlinear_divergence`, and
       `stats["energy_drift"]` holds the measured ratio.
     """
-    t1, dt = _defaults(system, t0, t1, dt, solver, stepsize_controller)
+    t1, dt = defaults(system, t0, t1, dt, solver, stepsize_controller)
     y0 = check_simulate_inputs(system, y0, t0, t1, dt, solver, ts, args, max_steps)
     if progress and progress_meter is not None:
         raise ValueError("pass progress=True or progress_meter, not both")
-    t0, t1, dt = (_as_python_number(x) for x in (t0, t1, dt))
-    _check_times(t0, t1, dt)
+    t0, t1, dt = (as_python_number(x) for x in (t0, t1, dt))
+    check_span(t0, t1, dt)
     if not isinstance(system, AbstractSystem):
         raise TypeError(
             "simulate needs a lagjax system (Lagrangian, Hamiltonian, "
@@ -273,7 +162,7 @@ def simulate(
     if dt is not None or not isinstance(
         stepsize_controller, (diffrax.AbstractAdaptiveStepSizeController, type(None))
     ):
-        solver = _with_implicit_tolerances(solver, rtol, atol)
+        solver = with_implicit_tolerances(solver, rtol, atol)
     user_state = UserState.of(flat, integrated, system)
     if event is not None:
         event = event_in_user_state(event, user_state, dtype)
@@ -443,13 +332,13 @@ def _integrate_scan(terms, solver, state0, args, run: _Run):
 def _diffeqsolve(terms, solver, state0, args, run: _Run):
     """The general path: `diffrax.diffeqsolve` with saving, adjoints, adaptivity."""
     t0, t1, dt, ts, dtype = run.t0, run.t1, run.dt, run.ts, run.dtype
-    controller, dt0 = _stepping(solver, t0, t1, dt, run.rtol, run.atol, run.controller)
+    controller, dt0 = stepping(solver, t0, t1, dt, run.rtol, run.atol, run.controller)
     max_steps = run.max_steps
     if max_steps is None:
         fixed = run.controller is None or isinstance(
             run.controller, diffrax.ConstantStepSize
         )
-        max_steps = (fixed and _fixed_step_count(t0, t1, dt)) or 100_000
+        max_steps = (fixed and fixed_step_count_or_none(t0, t1, dt)) or 100_000
     # diffrax promotes the state to the dtype of the times: give it the state's.
     t0, t1 = jnp.asarray(t0, dtype=dtype), jnp.asarray(t1, dtype=dtype)
     dt0 = None if dt0 is None else jnp.asarray(dt0, dtype=dtype)
