@@ -60,9 +60,10 @@ from typing import TYPE_CHECKING, Any
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jax.core import Tracer
 from jax.flatten_util import ravel_pytree
 
-from .functions import function_field
+from .functions import as_system_function
 from .linalg import solve_dense
 from .signature import call_with_arity, positional_arity
 
@@ -106,9 +107,9 @@ class Constraints(eqx.Module):
     holonomic rows first, then velocity rows.
     """
 
-    holonomic: Callable | None = function_field()
+    holonomic: Callable | None = eqx.field(converter=as_system_function)
     holonomic_arity: int = eqx.field(static=True)
-    velocity: Callable | None = function_field()
+    velocity: Callable | None = eqx.field(converter=as_system_function)
     velocity_arity: int = eqx.field(static=True)
     baumgarte_rate: float = eqx.field(static=True)
 
@@ -293,7 +294,7 @@ def refuse_start_off_constraints(
         "project_onto_constraints(lagrangian, q0, q̇0, t0, args) — the smallest "
         "change in the kinetic metric — if a projection is what you want."
     )
-    if not isinstance(violated, jax.core.Tracer):
+    if not isinstance(violated, Tracer):
         if bool(violated):
             raise ValueError(message.format(float(position), float(velocity)))
         return q, qdot

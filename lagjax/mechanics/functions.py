@@ -4,7 +4,7 @@ A plain Python function is part of a system's *structure*: it is stored static, 
 two systems of the same function compare equal and share their compilation. An
 equinox Module — a neural network, or any callable with array leaves — is part of
 its *data*: its arrays are pytree children of the system, so `eqx.filter_grad`,
-`jax.vmap` and `jax.jit` reach them. `function_field` makes both work from one
+`jax.vmap` and `jax.jit` reach them. `eqx.field(converter=as_system_function)` makes both work from one
 declaration; before it, every function was static, and a network used as H was
 silently frozen (its gradient exactly 0, with equinox's "JAX array set as static"
 warning).
@@ -33,8 +33,3 @@ def as_system_function(function: Callable | None) -> Any:
     if function is None or isinstance(function, eqx.Module):
         return function
     return StaticFunction(function)
-
-
-def function_field() -> Any:
-    """The dataclass field of a user function (see the module docstring)."""
-    return eqx.field(converter=as_system_function)

@@ -27,7 +27,7 @@ import equinox as eqx
 import jax
 
 from ..system import AbstractSystem, is_partitioned
-from .functions import function_field
+from .functions import as_system_function
 from .lagrangian import Lagrangian
 from .legendre import invert_gradient, tree_dot
 from .signature import (
@@ -132,7 +132,7 @@ class Hamiltonian(AbstractHamiltonian):
     Legendre transform to L a single linear solve.
     """
 
-    function: Callable = function_field()
+    function: Callable = eqx.field(converter=as_system_function)
     arity: int = eqx.field(static=True)
     quadratic_in_momentum: bool = eqx.field(static=True)
 
@@ -154,9 +154,9 @@ class SeparableHamiltonian(AbstractHamiltonian):
     to False for a non-quadratic kinetic energy such as the relativistic one.
     """
 
-    kinetic: Callable = function_field()
+    kinetic: Callable = eqx.field(converter=as_system_function)
     kinetic_arity: int = eqx.field(static=True)
-    potential: Callable = function_field()
+    potential: Callable = eqx.field(converter=as_system_function)
     potential_arity: int = eqx.field(static=True)
     quadratic_in_momentum: bool = eqx.field(static=True)
 

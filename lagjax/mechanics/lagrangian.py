@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jax.core import Tracer
 from jax.flatten_util import ravel_pytree
 
 from ..system import AbstractSystem, is_partitioned
@@ -30,7 +31,7 @@ from .constraints import (
     refuse_start_off_constraints,
 )
 from .euler_lagrange import euler_lagrange_acceleration
-from .functions import function_field
+from .functions import as_system_function
 from .legendre import tree_dot
 from .signature import (
     call_with_arity,
@@ -45,9 +46,7 @@ if TYPE_CHECKING:
 
 def _any_traced(*trees: Any) -> bool:
     """Whether any leaf is a JAX tracer (the call is being traced, not run)."""
-    return any(
-        isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(trees)
-    )
+    return any(isinstance(leaf, Tracer) for leaf in jax.tree_util.tree_leaves(trees))
 
 
 class Lagrangian(AbstractSystem):
@@ -70,11 +69,11 @@ class Lagrangian(AbstractSystem):
     `t` defaults to 0.0 and `args` to None in every method.
     """
 
-    function: Callable = function_field()
+    function: Callable = eqx.field(converter=as_system_function)
     arity: int = eqx.field(static=True)
-    force: Callable | None = function_field()
+    force: Callable | None = eqx.field(converter=as_system_function)
     force_arity: int = eqx.field(static=True)
-    dissipation: Callable | None = function_field()
+    dissipation: Callable | None = eqx.field(converter=as_system_function)
     dissipation_arity: int = eqx.field(static=True)
     quadratic_in_velocity: bool = eqx.field(static=True)
     constraints: Constraints | None
@@ -295,7 +294,7 @@ class Lagrangian(AbstractSystem):
             return (q0, self.momentum(q0, qdot0, t0, args))
 
         if self.constraints is not None:
-            y0 = refuse_start_off_constraints(self.constraints, *y0, t0, args)
+            y0 = refuse_start_off_constraints(self.constraints, y0[0], y0[1], t0, args)
             if solver.term_structure is RattleTerm:
                 return RattleTerm(self), canonical_start(), self.to_hamiltonian()
             return ConstrainedLagrangianTerm(self), y0, self

@@ -39,7 +39,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from lagjax.mechanics.functions import function_field
+from lagjax.mechanics.functions import as_system_function
 from lagjax.mechanics.signature import call_with_arity, check_scalar, positional_arity
 from lagjax.system import AbstractSystem
 
@@ -67,7 +67,7 @@ class RigidBody(AbstractSystem):
     """
 
     moments: jax.Array
-    potential: Callable | None = function_field()
+    potential: Callable | None = eqx.field(converter=as_system_function)
     potential_arity: int = eqx.field(static=True)
 
     def __init__(self, moments: Any, potential: Callable | None = None):
