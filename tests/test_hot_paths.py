@@ -42,6 +42,7 @@ V = jnp.array([0.3, -0.7])
         (lambda v: jnp.where(v[0] > 0, v[0] ** 2, 0.0), False),  # branch on v
         (lambda v: jnp.abs(v[0]) * v[1], False),
         (lambda v: v[0] ** 2 / v[1], False),
+        (lambda v: v[0] * v[1].astype(int), False),  # truncation
     ],
 )
 def test_quadratic_degree_is_read_from_the_program(function, expected):

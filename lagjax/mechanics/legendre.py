@@ -266,7 +266,10 @@ def _equation_degrees(eqn: Any, degrees: list[int]) -> list[int]:
         if closed is not None:
             inner = getattr(closed, "jaxpr", closed)
             return _jaxpr_degrees(inner, degrees)
-    if name in _LINEAR:
+    rounds = name == "convert_element_type" and not jnp.issubdtype(
+        eqn.params["new_dtype"], jnp.inexact
+    )  # a cast to an integer truncates: not a polynomial
+    if name in _LINEAR and not rounds:
         return [max(degrees, default=0)] * count
     if name in _PRODUCT:
         return [sum(degrees)] * count
