@@ -7,7 +7,9 @@ velocity: solve $\partial H/\partial p(q, p) = \dot q$ for $p$, then $L = p\cdot
 
 - a first Newton step from zero — exact when the function is quadratic (the usual
   $L = \tfrac12\dot q^T M(q)\dot q + a(q)\cdot\dot q - V$), so then it is the linear
-  solve $M\dot q = p - a$ and nothing more;
+  solve $M\dot q = p - a$ and nothing more. Whether it is quadratic is declared
+  or read off the traced program (`is_at_most_quadratic`); for few variables the
+  solve is then scalar arithmetic that fuses into an implicit solver's step;
 - otherwise a *damped* Newton iteration on the convex merit function
   $\phi(x) = f(x) - p\cdot x$ (whose gradient vanishes at the solution): each
   Newton step is halved until $\phi$ is finite and decreases (Armijo's test). This
