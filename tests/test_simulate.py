@@ -206,7 +206,7 @@ def test_failed_implicit_solve_is_reported_on_the_scan_path():
     solver = lj.GaussLegendre(stages=2)  # fixed-point iteration diverges at ωh = 100
     traj = lj.simulate(stiff, (1.0, 0.0), t1=1.0, dt=0.1, solver=solver, throw=False)
     assert traj.result != diffrax.RESULTS.successful
-    with pytest.raises(Exception, match=r"nonlinear solver|non-finite"):
+    with pytest.raises(Exception, match=r"stage equations of .* did not converge"):
         lj.simulate(stiff, (1.0, 0.0), t1=1.0, dt=0.1, solver=solver)
 
 
