@@ -74,10 +74,16 @@ def test_unchecked_acceleration_is_not_finite():
 
 
 def test_degenerate_legendre_transform_raises():
+    # On values: an error. Under a trace: NaN (no branch in the step), or an error
+    # with check=True.
     lag = lj.Lagrangian(lambda q, qd: q * qd - q**2, quadratic_in_velocity=True)
     ham = lag.to_hamiltonian()
     with pytest.raises(Exception, match="singular"):
-        jax.block_until_ready(jax.jit(ham)(1.0, 2.0))
+        jax.block_until_ready(ham.velocity(1.0, 2.0))
+    assert bool(jnp.isnan(jax.jit(ham)(1.0, 2.0)))
+    checked = jax.jit(lambda q, p: ham.vector_field(q, p, check=True))
+    with pytest.raises(Exception, match="singular"):
+        jax.block_until_ready(checked(1.0, 2.0))
 
 
 def test_singular_hamiltonian_hessian_raises():

@@ -28,7 +28,7 @@ import jax
 
 from ..system import AbstractSystem, is_partitioned
 from .functions import as_system_function
-from .lagrangian import Lagrangian
+from .lagrangian import Lagrangian, _any_traced
 from .legendre import invert_gradient, tree_dot
 from .signature import (
     call_with_arity,
@@ -217,15 +217,35 @@ class LegendreHamiltonian(AbstractHamiltonian):
         self.lagrangian = lagrangian
         self.quadratic_in_momentum = lagrangian.quadratic_in_velocity
 
+    def velocity(
+        self,
+        q: Any,
+        p: Any,
+        t: Any = 0.0,
+        args: Any = None,
+        *,
+        check: bool | str | None = None,
+    ) -> Any:
+        """q̇ solved from p = ∂L/∂q̇(q, q̇, t).
+
+        A singular mass matrix raises on concrete values and gives NaN under a
+        trace (`check` None, as in `Lagrangian.acceleration`: a branch per
+        evaluation would split an integration step; `simulate` reports the
+        non-finite state after the loop). `check=True` always raises.
+        """
+        if check is None:
+            check = "nan" if _any_traced(q, p, t) else True
+        return self._velocity(q, p, t, args, check)
+
     @eqx.filter_jit
-    def velocity(self, q: Any, p: Any, t: Any = 0.0, args: Any = None) -> Any:
-        """q̇ solved from p = ∂L/∂q̇(q, q̇, t)."""
+    def _velocity(self, q, p, t, args, check):
         check_same_structure(q, p, "q", "p")
         return invert_gradient(
             lambda qdot: self.lagrangian(q, qdot, t, args),
             p,
             quadratic=self.lagrangian.quadratic_in_velocity,
             what="The mass matrix ∂²L/∂q̇∂q̇",
+            check=check,
         )
 
     @eqx.filter_jit
@@ -233,12 +253,25 @@ class LegendreHamiltonian(AbstractHamiltonian):
         qdot = self.velocity(q, p, t, args)
         return tree_dot(p, qdot) - self.lagrangian(q, qdot, t, args)
 
-    @eqx.filter_jit
     def vector_field(
-        self, q: Any, p: Any, t: Any = 0.0, args: Any = None
+        self,
+        q: Any,
+        p: Any,
+        t: Any = 0.0,
+        args: Any = None,
+        *,
+        check: bool | str | None = None,
     ) -> tuple[Any, Any]:
-        """(q̇, ṗ) = (q̇(q, p), ∂L/∂q + Q − ∂D/∂q̇), non-conservative forces included."""
-        qdot = self.velocity(q, p, t, args)
+        """(q̇, ṗ) = (q̇(q, p), ∂L/∂q + Q − ∂D/∂q̇), non-conservative forces included.
+
+        `check` as in `velocity`."""
+        if check is None:
+            check = "nan" if _any_traced(q, p, t) else True
+        return self._vector_field(q, p, t, args, check)
+
+    @eqx.filter_jit
+    def _vector_field(self, q, p, t, args, check):
+        qdot = self._velocity(q, p, t, args, check)
         pdot = jax.grad(self.lagrangian, argnums=0)(q, qdot, t, args)
         force = self.lagrangian.generalized_force(q, qdot, t, args)
         if force is not None:
