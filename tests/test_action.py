@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 
 import lagjax as lj
+from lagjax.hamilton_principle import action, action_of_path, principal_function
 from lagjax.scenes.central import KeplerCartesian
 from lagjax.scenes.oscillators import HarmonicOscillator
 from lagjax.shooting import action_between, trajectory_between
-from lagjax.hamilton_principle import action, action_of_path, principal_function
 
 from .helpers import relative_close
 

@@ -35,7 +35,6 @@ def results(tmp_path_factory) -> Path:
         cwd=ROOT,
         capture_output=True,
         text=True,
-        timeout=300,
     )
     assert run.returncode == 0, (
         f"the script failed:\n{(run.stdout + run.stderr)[-3000:]}"

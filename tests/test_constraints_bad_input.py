@@ -35,7 +35,9 @@ def test_simulate_from_a_degenerate_state_names_the_constraint():
     # q = 0 is both off the circle (g = -1/2) and where its Jacobian vanishes: the
     # start is refused first, with the residual.
     lag = lj.Lagrangian(free_particle, constraints=squared_length)
-    with pytest.raises(Exception, match=r"violates the constraints: max \|g\(q0, t0\)\| = 0.5"):
+    with pytest.raises(
+        Exception, match=r"violates the constraints: max \|g\(q0, t0\)\| = 0.5"
+    ):
         run = lj.simulate(lag, (jnp.zeros(2), jnp.zeros(2)), t1=0.1, dt=0.01)
         jax.block_until_ready(run.q)
 

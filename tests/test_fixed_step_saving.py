@@ -31,7 +31,9 @@ def test_saved_states_follow_the_exact_solution_at_fourth_order():
     ts = jnp.linspace(0.0, 20.0, 41)
     errors = []
     for dt in (0.1, 0.05):
-        run = lj.simulate(OSCILLATOR, START, t1=20.0, dt=dt, solver=lj.Yoshida4(), ts=ts)
+        run = lj.simulate(
+            OSCILLATOR, START, t1=20.0, dt=dt, solver=lj.Yoshida4(), ts=ts
+        )
         assert int(run.stats["num_steps"]) == round(20.0 / dt)
         np.testing.assert_array_equal(run.ts, ts)
         errors.append(float(jnp.max(jnp.abs(run.q - jnp.cos(ts)))))
@@ -56,7 +58,9 @@ def test_first_save_after_t0_and_backward_runs():
     forward = lj.simulate(
         OSCILLATOR, START, t1=3.0, dt=0.01, ts=jnp.array([1.0, 2.0, 3.0])
     )
-    np.testing.assert_allclose(forward.q, jnp.cos(jnp.array([1.0, 2.0, 3.0])), atol=1e-9)
+    np.testing.assert_allclose(
+        forward.q, jnp.cos(jnp.array([1.0, 2.0, 3.0])), atol=1e-9
+    )
     backward = lj.simulate(
         OSCILLATOR, START, t0=0.0, t1=-2.0, dt=-0.01, ts=jnp.array([-1.0, -2.0])
     )
@@ -90,11 +94,11 @@ def test_failed_implicit_step_is_reported_on_the_saving_path(throw):
     stiff = lj.SeparableHamiltonian(lambda p: 0.5 * p**2, lambda q: 0.5e6 * q**4)
     solver = lj.GaussLegendre(stages=2, root_find_max_steps=1)
     ts = jnp.linspace(0.0, 1.0, 11)
-    call = lambda: lj.simulate(  # noqa: E731
+    call = lambda: lj.simulate(
         stiff, START, t1=1.0, dt=0.1, solver=solver, ts=ts, throw=throw
     )
     if throw:
-        with pytest.raises(Exception, match="(?i)nonlinear|solve|converge"):
+        with pytest.raises(Exception, match=r"(?i)nonlinear|solve|converge"):
             call()
     else:
         assert call().result != diffrax.RESULTS.successful

@@ -77,9 +77,7 @@ def test_the_library_imports_without_matplotlib():
         print("imported", len(sys.modules))
         """
     )
-    run = subprocess.run(
-        [sys.executable, "-c", script], capture_output=True, text=True, timeout=120
-    )
+    run = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
     assert run.returncode == 0, run.stderr[-2000:]
 
 

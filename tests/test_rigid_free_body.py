@@ -19,7 +19,6 @@ from lagjax.rigid import (
     axis_angle_quaternion,
     quaternion_to_matrix,
 )
-from lagjax.terms import RigidBodyTerm
 from lagjax.rigid.free_body import (
     free_body_period,
     invariable_plane_distance,
@@ -32,6 +31,7 @@ from lagjax.solvers.lie_poisson import (
     RigidBodyYoshida4,
 )
 from lagjax.special import complete_elliptic_k, complete_elliptic_k_from_complement
+from lagjax.terms import RigidBodyTerm
 
 SAMPLES = 2001
 Q0 = axis_angle_quaternion(jnp.array([0.6, 0.0, 0.8]), 0.7)

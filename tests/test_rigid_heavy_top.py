@@ -19,7 +19,6 @@ from lagjax.rigid import (
     euler_zxz_to_rotation,
     quaternion_to_matrix,
 )
-from lagjax.terms import RigidBodyTerm
 from lagjax.rigid.heavy_top import (
     gyroscopic_precession_rates,
     steady_precession_rates,
@@ -27,6 +26,7 @@ from lagjax.rigid.heavy_top import (
 )
 from lagjax.scenes.rigid import HeavySymmetricTop
 from lagjax.solvers.lie_poisson import QuaternionProjection, RigidBodyYoshida4
+from lagjax.terms import RigidBodyTerm
 
 SAMPLES = 3001
 TOLERANCE = dict(rtol=1e-12, atol=1e-12)

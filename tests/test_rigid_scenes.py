@@ -9,7 +9,6 @@ import pytest
 
 import lagjax as lj
 from lagjax.rigid import euler_zxz_to_rotation, quaternion_to_matrix
-from lagjax.terms import RigidBodyTerm
 from lagjax.scenes.rigid import (
     DAY,
     SCENES,
@@ -19,6 +18,7 @@ from lagjax.scenes.rigid import (
     TorqueFreeBody,
 )
 from lagjax.solvers.lie_poisson import QuaternionProjection, RigidBodyYoshida4
+from lagjax.terms import RigidBodyTerm
 from tests.helpers import relative_close
 
 SAMPLES = 1201

@@ -93,7 +93,7 @@ def test_lagrangian_module_gradient_and_parameter_recovery():
     expected = _finite_difference(loss, model, lambda m: m.potential.stiffness)
     np.testing.assert_allclose(gradient.potential.stiffness, expected, rtol=1e-6)
     # Newton's method on the scalar stiffness, with the curvature by autodiff.
-    stiffness_loss = lambda k: loss(  # noqa: E731
+    stiffness_loss = lambda k: loss(
         eqx.tree_at(lambda m: m.potential.stiffness, model, k)
     )
     k = jnp.asarray(1.6)
@@ -104,7 +104,7 @@ def test_lagrangian_module_gradient_and_parameter_recovery():
 
 def test_plain_functions_still_share_compilation():
     # Two systems of the same plain function are equal (static structure).
-    potential = lambda q: 0.5 * q**2  # noqa: E731
+    potential = lambda q: 0.5 * q**2
     assert _separable(potential) == _separable(potential)
     system = _separable(POTENTIAL)
     leaves = jax.tree_util.tree_leaves(eqx.filter(system, eqx.is_array))
