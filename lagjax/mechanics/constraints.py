@@ -284,12 +284,15 @@ def refuse_start_off_constraints(
     velocity = jnp.max(
         jnp.abs(constraints.velocity_residual(q, qdot, t, args)), initial=0.0
     )
-    violated = (position > _START_TOLERANCE * scale_q) | (
-        velocity > _START_TOLERANCE * scale_v
-    )
+    # In float32 the start itself carries round-off of ~1e-7: the tolerance is never
+    # below a hundred ulps of the state's dtype.
+    eps = float(jnp.finfo(jnp.result_type(scale_q)).eps)
+    tolerance = max(_START_TOLERANCE, 100 * eps)
+    violated = (position > tolerance * scale_q) | (velocity > tolerance * scale_v)
     message = (
         "The initial state violates the constraints: max |g(q0, t0)| = {}, max "
-        "|ġ or c(q0, q̇0, t0)| = {} (tolerance 1e-9 of the state's size). Start on "
+        "|ġ or c(q0, q̇0, t0)| = {} (tolerance 1e-9, or 100 ulps, of the state's "
+        "size). Start on "
         "the constraint manifold, e.g. (q0, q̇0), _ = lagjax.solvers.projection."
         "project_onto_constraints(lagrangian, q0, q̇0, t0, args) — the smallest "
         "change in the kinetic metric — if a projection is what you want."
