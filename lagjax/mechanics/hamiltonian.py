@@ -28,7 +28,7 @@ import jax
 
 from ..system import AbstractSystem, is_partitioned
 from .functions import as_system_function
-from .lagrangian import Lagrangian, _any_traced
+from .lagrangian import Lagrangian, singular_check
 from .legendre import invert_gradient, tree_dot
 from .signature import (
     call_with_arity,
@@ -233,9 +233,7 @@ class LegendreHamiltonian(AbstractHamiltonian):
         evaluation would split an integration step; `simulate` reports the
         non-finite state after the loop). `check=True` always raises.
         """
-        if check is None:
-            check = "nan" if _any_traced(q, p, t) else True
-        return self._velocity(q, p, t, args, check)
+        return self._velocity(q, p, t, args, singular_check(check, q, p, t))
 
     @eqx.filter_jit
     def _velocity(self, q, p, t, args, check):
@@ -265,9 +263,7 @@ class LegendreHamiltonian(AbstractHamiltonian):
         """(q̇, ṗ) = (q̇(q, p), ∂L/∂q + Q − ∂D/∂q̇), non-conservative forces included.
 
         `check` as in `velocity`."""
-        if check is None:
-            check = "nan" if _any_traced(q, p, t) else True
-        return self._vector_field(q, p, t, args, check)
+        return self._vector_field(q, p, t, args, singular_check(check, q, p, t))
 
     @eqx.filter_jit
     def _vector_field(self, q, p, t, args, check):

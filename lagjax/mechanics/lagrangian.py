@@ -44,9 +44,14 @@ if TYPE_CHECKING:
     from .hamiltonian import LegendreHamiltonian
 
 
-def _any_traced(*trees: Any) -> bool:
-    """Whether any leaf is a JAX tracer (the call is being traced, not run)."""
-    return any(isinstance(leaf, Tracer) for leaf in jax.tree_util.tree_leaves(trees))
+def singular_check(check: bool | str | None, *trees: Any) -> bool | str:
+    """The singular-matrix test to run: `check` itself when given, else an error on
+    concrete values and NaN poisoning when any leaf is traced (a branch per
+    evaluation would split a fused integration step)."""
+    if check is not None:
+        return check
+    traced = any(isinstance(leaf, Tracer) for leaf in jax.tree_util.tree_leaves(trees))
+    return "nan" if traced else True
 
 
 class Lagrangian(AbstractSystem):
@@ -163,8 +168,7 @@ class Lagrangian(AbstractSystem):
         `False` skips the test (an exactly singular matrix still gives inf/NaN).
         """
         check_same_structure(q, qdot, "q", "qdot")
-        if check is None:
-            check = "nan" if _any_traced(q, qdot, t) else True
+        check = singular_check(check, q, qdot, t)
         self(q, qdot, t, args)  # trace-time checks of L's output; no run-time cost
         free = euler_lagrange_acceleration(
             self._call_unchecked,
