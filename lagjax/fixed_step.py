@@ -8,9 +8,13 @@ a diffrax run from a hand-written loop (measured in `benchmarks/solver_overhead.
 `simulate` therefore takes this path for `dt` given, default adjoint and no
 progress meter, when only the final state is saved or the save times lie on the
 step grid at a uniform spacing (`ts = linspace` over multiples of dt, every k-th
-step): then two nested scans save without interpolation. The solver and its `step` are the same diffrax
-objects, so results match `diffeqsolve` with `ConstantStepSize` (including the
-shortened last step) to round-off.
+step): then two nested scans save without interpolation. The other savings —
+`ts` off the grid, `SaveAt(steps=...)`, dense output — are scans too
+(`scan_saving.py`, `off_grid_saves.py`, built on `step_function` and
+`integrate_every_step` here). The solver and its `step` are the same diffrax
+objects, so results match `diffeqsolve` with `ConstantStepSize` to round-off when
+the span is a whole number of steps; otherwise the scans shorten the last step
+where diffrax spreads the span over equal steps.
 """
 
 from __future__ import annotations
@@ -38,7 +42,9 @@ def fixed_step_count(t0: float, t1: float, dt: float) -> int:
     return max(1, math.ceil(ratio))
 
 
-def _step_function(terms, solver, t0, dt, args, dtype, last_step=None, t1=None):
+def step_function(
+    terms, solver, t0, dt, args, dtype, last_step=None, t1=None, emit=None, until=None
+):
     """The scan body of one fixed step k → k + 1, carrying (y, state, result, k).
 
     Times are formed from the step index (t0 + k·dt), not accumulated, so every
@@ -54,41 +60,65 @@ def _step_function(terms, solver, t0, dt, args, dtype, last_step=None, t1=None):
     computed up to the failure and where it stopped. Detection is cheap — one
     sum of the state and two selects per step, inside the fused step
     (`benchmarks/solver_overhead.py` measures the loop with it).
+
+    `emit(y, dense_info)`, when given, is what the scan outputs per step (the new
+    state for `SaveAt(steps=True)`, the dense information for dense output).
+    `until`, when given, is a step index the scan does not pass: steps from it on
+    are computed and not taken (the same selects), so a scan of fixed length can
+    take a varying number of steps (`off_grid_saves`).
     """
 
     def one_step(carry, _):
         y, solver_state, result, k = carry
-        start = (t0 + k * dt).astype(dtype)
-        end = t0 + (k + 1) * dt
-        if last_step is not None:
-            end = jnp.where(k == last_step, t1, end)  # pyright: ignore[reportArgumentType]
-        y_next, _, _, solver_state, step_result = solver.step(
-            terms, start, end.astype(dtype), y, args, solver_state, False
+        start, end = step_times(t0, dt, k, dtype, last_step, t1)
+        y_next, _, dense_info, state_next, step_result = solver.step(
+            terms, start, end, y, args, solver_state, False
         )
         step_result = diffrax.RESULTS.where(
-            _is_finite(y_next),
+            all_finite(y_next),
             step_result,
             diffrax.RESULTS.nonfinite,  # pyright: ignore[reportArgumentType]
         )
-        result = diffrax.RESULTS.where(
-            result == diffrax.RESULTS.successful, step_result, result
-        )
+        counts = result == diffrax.RESULTS.successful
+        if until is not None:
+            counts = counts & (k < until)  # a step not taken cannot fail the run
+        result = diffrax.RESULTS.where(counts, step_result, result)
         failed = result != diffrax.RESULTS.successful
-        y = jax.tree_util.tree_map(
-            lambda new, old: jnp.where(failed, old, new), y_next, y
-        )
-        return (y, solver_state, result, jnp.where(failed, k, k + 1)), None
+        stay = failed if until is None else failed | (k >= until)
+
+        def keep(new, old):
+            return jnp.where(stay, old, new)
+
+        if until is None:
+            y, solver_state = jax.tree_util.tree_map(keep, y_next, y), state_next
+        else:
+            # A step not taken leaves the solver's state (e.g. a compensated sum's
+            # error term) as it was, too.
+            y, solver_state = jax.tree_util.tree_map(
+                keep, (y_next, state_next), (y, solver_state)
+            )
+        carry = (y, solver_state, result, jnp.where(stay, k, k + 1))
+        return carry, None if emit is None else emit(y, dense_info)
 
     return one_step
 
 
-def _is_finite(state: Any) -> jax.Array:
+def step_times(t0, dt, k, dtype, last_step=None, t1=None) -> tuple[Any, Any]:
+    """(t_k, t_{k+1}) of step k in `dtype`: t0 + k·dt, the last step ending at t1."""
+    start = (t0 + k * dt).astype(dtype)
+    end = t0 + (k + 1) * dt
+    if last_step is not None:
+        end = jnp.where(k == last_step, t1, end)  # pyright: ignore[reportArgumentType]
+    return start, end.astype(dtype)
+
+
+def all_finite(state: Any) -> jax.Array:
     """Whether every entry of `state` is finite: one sum (inf and NaN propagate)."""
     total = sum(jnp.sum(leaf) for leaf in jax.tree_util.tree_leaves(state))
     return jnp.isfinite(total)
 
 
-def _initial_carry(terms, solver, t0, dt, y0, args, dtype):
+def initial_carry(terms, solver, t0, dt, y0, args, dtype):
     state = solver.init(
         terms, jnp.asarray(t0, dtype), jnp.asarray(t0 + dt, dtype), y0, args
     )
@@ -118,8 +148,8 @@ def integrate_fixed_steps(
     """
     steps = fixed_step_count(t0, t1, dt)
     dt = math.copysign(abs(dt), t1 - t0)
-    one_step = _step_function(terms, solver, t0, dt, args, dtype, steps - 1, t1)
-    initial = _initial_carry(terms, solver, t0, dt, y0, args, dtype)
+    one_step = step_function(terms, solver, t0, dt, args, dtype, steps - 1, t1)
+    initial = initial_carry(terms, solver, t0, dt, y0, args, dtype)
     (y1, _, result, taken), _ = jax.lax.scan(one_step, initial, None, length=steps)
     return y1, result, taken
 
@@ -165,11 +195,11 @@ def integrate_fixed_steps_saving(
     `grid = (lead, every, saves)` from `uniform_grid_saves`: `lead` steps, a save,
     then `saves − 1` times `every` steps and a save. Two nested `lax.scan`s, so the
     saving costs one copy per save and nothing per step. `saved[j]` is False for
-    the saves a failure (see `_step_function`) kept from being reached.
+    the saves a failure (see `step_function`) kept from being reached.
     """
     lead, every, saves = grid
-    one_step = _step_function(terms, solver, t0, dt, args, dtype)
-    carry = _initial_carry(terms, solver, t0, dt, y0, args, dtype)
+    one_step = step_function(terms, solver, t0, dt, args, dtype)
+    carry = initial_carry(terms, solver, t0, dt, y0, args, dtype)
     if lead:
         carry, _ = jax.lax.scan(one_step, carry, None, length=lead)
     first = carry[0], carry[2] == diffrax.RESULTS.successful
@@ -183,3 +213,37 @@ def integrate_fixed_steps_saving(
         lambda a, b: jnp.concatenate([jnp.asarray(a)[None], b]), first, later
     )
     return ys, carry[2], carry[3], saved
+
+
+@eqx.filter_jit
+def integrate_every_step(
+    terms: Any,
+    solver: diffrax.AbstractSolver,
+    t0: float,
+    t1: float,
+    dt: float,
+    y0: Any,
+    args: Any,
+    dtype: Any = float,
+    states: bool = True,
+    dense: bool = False,
+) -> tuple[Any, Any, Any, Any, Any]:
+    """Fixed steps from t0 to t1 keeping every step:
+    `(y1, ys, dense_infos, result, steps_taken)`.
+
+    One `lax.scan` whose outputs are, per step, the new state (`states`: for
+    `SaveAt(steps=...)`) and the solver's dense information (`dense`: the
+    `diffrax.DenseInterpolation` of the run). Entries after a failure repeat the
+    last good state; `steps_taken` says how many are results.
+    """
+    steps = fixed_step_count(t0, t1, dt)
+    dt = math.copysign(abs(dt), t1 - t0)
+
+    def emit(y, dense_info):
+        return (y if states else None), (dense_info if dense else None)
+
+    one_step = step_function(terms, solver, t0, dt, args, dtype, steps - 1, t1, emit)
+    initial = initial_carry(terms, solver, t0, dt, y0, args, dtype)
+    (y1, _, result, taken), kept = jax.lax.scan(one_step, initial, None, length=steps)
+    ys, infos = kept  # pyright: ignore[reportGeneralTypeIssues]
+    return y1, ys, infos, result, taken

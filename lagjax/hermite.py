@@ -175,7 +175,27 @@ class HermiteDenseOutput(diffrax.AbstractWrappedSolver):
     def func(self, terms, t0, y0, args):
         return self.solver.func(terms, t0, y0, args)
 
+    def state_at(self, terms, t, y, args, inner):
+        """This solver's state at (t, y) from the wrapped solver's state `inner`:
+        a step taken from there gives the same dense information as one inside a
+        run of this solver (the start derivatives computed afresh, not carried)."""
+        return inner, self._derivatives(terms, t, y, args)
+
+    @staticmethod
+    def inner_state(state):
+        """The wrapped solver's state within this solver's."""
+        return state[0]
+
 
 def needs_hermite(solver: diffrax.AbstractSolver) -> bool:
     """Whether `solver`'s own interpolation is only linear between steps."""
     return solver.interpolation_cls is diffrax.LocalLinearInterpolation
+
+
+def with_dense_output(
+    solver: diffrax.AbstractSolver, terms: Any
+) -> diffrax.AbstractSolver:
+    """`solver` with the Hermite extension if its own is linear, else itself."""
+    if needs_hermite(solver):
+        return HermiteDenseOutput.for_solver(solver, terms)
+    return solver

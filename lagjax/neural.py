@@ -1,21 +1,19 @@
 r"""Euler–Lagrange accelerations of a network-sized Lagrangian, for training.
 
-`Lagrangian.acceleration` re-expresses L as scalar arithmetic for up to six
-coordinates, which makes closed-form Lagrangians as fast as hand-written equations
-but pushes every scalar tangent through the whole of a neural network separately:
-for an MLP the compilation of a training step's gradient grows from seconds to a
-minute. A network's cost is its matrix products, and the least work the equations
-need is one gradient of L and n + 1 Hessian–vector products, batched here in one
-forward-over-reverse pass:
+`network_acceleration(net, q, qdot)` is the q̈ of an autonomous L(q, q̇) on 1-D
+arrays by one gradient and n + 1 Hessian–vector products in one batched
+forward-over-reverse pass (`lagjax.mechanics.network_formulation`, which has the
+math), solved by LU without a conditioning test: the bare prediction of a
+Lagrangian neural network's training loss. `lj.Lagrangian(net).acceleration` uses
+the same formulation for a network L (an equinox Module with array leaves) and adds
+time dependence, `args`, forces, constraints, pytree coordinates and the
+singular-matrix check.
 
-$$ M\ddot q = \frac{\partial L}{\partial q}
-   - \frac{\partial^2 L}{\partial\dot q\,\partial q}\dot q,
-   \qquad M = \frac{\partial^2 L}{\partial\dot q\,\partial\dot q}, $$
-
-with the columns of M the derivative of ∇L along $(0, e_k)$ and the transport term
-its derivative along $(\dot q, 0)$. Compared with the published Lagrangian neural
-network formula (Hessian, Jacobian of the Jacobian, pseudo-inverse) this is 1.5×
-faster per training step on CPU (`benchmarks/lnn_training.py`).
+On one LNN training step (`benchmarks/lnn_training.py`: 256 double-pendulum states,
+4-128-128-1 softplus MLP, CPU, float64) this is about 1.5× faster than the
+published formula (`jax.hessian`, Jacobian of the Jacobian, pseudo-inverse), which
+is near the ceiling that counting the network's matrix products allows for any
+formulation built from JAX's generic derivatives; the benchmark gives the count.
 
 References: M. Cranmer et al., "Lagrangian Neural Networks" (2020),
 arXiv:2003.04630, eq. 6; M. Lutter, C. Ritter, J. Peters, "Deep Lagrangian
@@ -29,6 +27,8 @@ from collections.abc import Callable
 import jax
 import jax.numpy as jnp
 
+from .mechanics.network_formulation import hessian_vector_system
+
 
 def network_acceleration(
     lagrangian: Callable[[jax.Array, jax.Array], jax.Array],
@@ -39,7 +39,7 @@ def network_acceleration(
 
     No conditioning test is made: a singular mass matrix gives inf/NaN (from the
     LU solve), which a training loss then shows. Use `lj.Lagrangian(L).acceleration`
-    for closed-form Lagrangians, forces, time dependence or pytree coordinates.
+    for forces, time dependence, pytree coordinates or a singularity check.
     """
     q, qdot = jnp.asarray(q), jnp.asarray(qdot)
     if q.ndim != 1 or q.shape != qdot.shape:
@@ -47,14 +47,7 @@ def network_acceleration(
             "network_acceleration takes q and qdot as 1-D arrays of one length; got "
             f"shapes {q.shape} and {qdot.shape}. vmap it over a batch of states."
         )
-    n = q.shape[0]
-    gradient = jax.grad(lagrangian, argnums=(0, 1))
-    tangents_q = jnp.concatenate([jnp.zeros((n, n), q.dtype), qdot[None]], axis=0)
-    tangents_v = jnp.concatenate([jnp.eye(n, dtype=q.dtype), jnp.zeros((1, n))], axis=0)
-
-    def along(dq, dv):
-        return jax.jvp(gradient, (q, qdot), (dq, dv))
-
-    (force, _), (_, second) = jax.vmap(along)(tangents_q, tangents_v)
-    mass, transport = second[:n], second[n]
-    return jnp.linalg.solve(mass, force[0] - transport)
+    mass, rhs = hessian_vector_system(
+        lambda a, b, _t: lagrangian(a, b), q, qdot, jnp.zeros((), q.dtype)
+    )
+    return jnp.linalg.solve(mass, rhs)

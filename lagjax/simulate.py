@@ -49,6 +49,7 @@ from .fixed_step import (
 from .flat_state import flattened
 from .hermite import HermiteDenseOutput, needs_hermite
 from .precision import cast_floats, working_dtype
+from .scan_saving import ScanSaving, integrate_saving, scan_saving
 from .solvers.implicit import stage_failure_message
 from .step_grid import grid_step
 from .stepping import (
@@ -250,22 +251,27 @@ class _Run(NamedTuple):
     progress_meter: diffrax.AbstractProgressMeter | None = None
 
     def fits_scan(self) -> bool:
-        """Fixed steps, default adjoint, no progress meter, no dense output or
-        event, and only the final state or states on a uniform subgrid of the steps
-        saved: the plain-scan path."""
+        """Fixed steps, default adjoint, no progress meter, step-size controller or
+        event, and a saving the scans cover (`scan_saving`): the scan path."""
         plain = (
             self.dt is not None
-            and self.saveat is None
             and self.adjoint is None
             and not self.progress
-            and self.max_steps is None
-            and not self.dense
             and self.event is None
             and self.controller is None
             and self.progress_meter is None
             and all(isinstance(x, (int, float)) for x in (self.t0, self.t1, self.dt))
         )
+        return plain and (self.saves_on_grid() or self.saving() is not None)
+
+    def saves_on_grid(self) -> bool:
+        """Only the final state, or `ts` on a uniform subgrid of the steps."""
+        plain = self.saveat is None and self.max_steps is None and not self.dense
         return plain and (self.ts is None or self.save_grid() is not None)
+
+    def saving(self) -> ScanSaving | None:
+        return scan_saving(self.t0, self.t1, self.dt, self.ts, self.saveat,
+                           self.dense, self.max_steps, self.dtype)  # fmt: skip
 
     def save_grid(self) -> tuple[int, int, int] | None:
         """`(lead, every, saves)` of `ts` on the step grid within [t0, t1], or None
@@ -292,7 +298,14 @@ def _integrate_scan(terms, solver, state0, args, run: _Run):
     as diffrax marks unused slots (t = inf, states inf).
     """
     step = grid_step(run.t0, run.t1, run.dt, run.dtype)
-    if run.ts is None:
+    interpolation = None
+    if not run.saves_on_grid():
+        plan = run.saving()
+        assert plan is not None  # fits_scan() checked it
+        saved_ts, ys, result, steps, interpolation = integrate_saving(
+            terms, solver, state0, args, plan, run.t0, run.t1, run.dtype
+        )
+    elif run.ts is None:
         y1, result, steps = integrate_fixed_steps(
             terms, solver, run.t0, run.t1, step, state0, args, run.dtype
         )
@@ -326,7 +339,7 @@ def _integrate_scan(terms, solver, state0, args, run: _Run):
     stats = dict(
         num_steps=counts, num_accepted_steps=counts, num_rejected_steps=0 * counts
     )
-    return saved_ts, ys, stats, result, None
+    return saved_ts, ys, stats, result, interpolation
 
 
 def _diffeqsolve(terms, solver, state0, args, run: _Run):

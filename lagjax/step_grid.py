@@ -6,13 +6,12 @@ t0 + (t1 − t0)·k/n — h wobbles by an ulp of t from step to step. For a symp
 method a varying step is a different map each step, and the modified energy it
 conserves random-walks with the wobble: on Störmer–Verlet over 6·10⁵ steps of
 the oscillator, 7e-12 instead of 3.5e-16 (`tests/test_simulate.py`). `grid_step`
-rounds dt so that every t0 + k·dt is exact, and the scan path (`fixed_step.py`,
-final state only) forms its times that way.
-
-Runs that save states go through `diffeqsolve` with diffrax's own grid instead:
-the rounded dt moves the grid off save times that are multiples of the user's dt
-by up to k·ulp, and linear interpolation over that sliver cost more (2e-9 in the
-double pendulum's energy, saved every 0.1 s over 100 s) than the wobble does.
+rounds dt so that every t0 + k·dt is exact, and the scan paths (`fixed_step.py`,
+`scan_saving.py`: every fixed-step run diffeqsolve does not take) form their times
+that way. Save times off that grid are read from the continuous extension
+(`lagjax.hermite`) of the step they fall in, to the method's order; the rounded
+dt moves a save time meant for the user's grid by up to k·ulp into a neighbouring
+step, where the extension is exact to round-off at its end.
 
 References: Hairer, Lubich & Wanner, *Geometric Numerical Integration*, 2nd ed.,
 Springer (2006), §VIII.5 (round-off and Brouwer's law), §VIII.2 (variable steps

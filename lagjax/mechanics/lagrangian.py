@@ -33,6 +33,7 @@ from .constraints import (
 from .euler_lagrange import euler_lagrange_acceleration
 from .functions import as_system_function
 from .legendre import tree_dot
+from .network_formulation import holds_network, network_euler_lagrange_acceleration
 from .signature import (
     call_with_arity,
     check_same_structure,
@@ -70,6 +71,14 @@ class Lagrangian(AbstractSystem):
       1-D array), or a `Constraints` object (also nonholonomic ones). `acceleration`
       then includes the constraint forces; `multipliers` and `constraint_force`
       give them (see `lagjax.mechanics.constraints`).
+    - `formulation`: how `acceleration` derives q̈. `"closed_form"`:
+      `euler_lagrange_acceleration` (scalar arithmetic up to six coordinates — the
+      speed of hand-written equations for a formula L — dense above). `"network"`:
+      one gradient and n + 1 Hessian–vector products
+      (`lagjax.mechanics.network_formulation`), the fewest passes through an L
+      whose cost is its matrix products. `"auto"` (default) picks `"network"` when
+      L is an equinox Module with floating array leaves (a neural network, or any
+      Module with trainable arrays), else `"closed_form"`.
 
     `t` defaults to 0.0 and `args` to None in every method.
     """
@@ -82,6 +91,7 @@ class Lagrangian(AbstractSystem):
     dissipation_arity: int = eqx.field(static=True)
     quadratic_in_velocity: bool = eqx.field(static=True)
     constraints: Constraints | None
+    formulation: str = eqx.field(static=True)
 
     def __init__(
         self,
@@ -91,6 +101,7 @@ class Lagrangian(AbstractSystem):
         dissipation: Callable | None = None,
         quadratic_in_velocity: bool = False,
         constraints: Callable | Constraints | None = None,
+        formulation: str = "auto",
     ):
         self.function = L
         self.arity = positional_arity(L, minimum=2, maximum=4, what="the Lagrangian L")
@@ -112,6 +123,14 @@ class Lagrangian(AbstractSystem):
         if constraints is not None and not isinstance(constraints, Constraints):
             constraints = Constraints(holonomic=constraints)
         self.constraints = constraints
+        if formulation not in ("auto", "closed_form", "network"):
+            raise ValueError(
+                "formulation is 'auto', 'closed_form' or 'network'; got "
+                f"{formulation!r}"
+            )
+        if formulation == "auto":
+            formulation = "network" if holds_network(L) else "closed_form"
+        self.formulation = formulation
 
     def __call__(self, q: Any, qdot: Any, t: Any = 0.0, args: Any = None) -> jax.Array:
         """The value of L."""
@@ -170,15 +189,7 @@ class Lagrangian(AbstractSystem):
         check_same_structure(q, qdot, "q", "qdot")
         check = singular_check(check, q, qdot, t)
         self(q, qdot, t, args)  # trace-time checks of L's output; no run-time cost
-        free = euler_lagrange_acceleration(
-            self._call_unchecked,
-            q,
-            qdot,
-            t,
-            args,
-            self.generalized_force(q, qdot, t, args),
-            check=check,
-        )
+        free = self._free_acceleration(q, qdot, t, args, check=check)
         if self.constraints is None:
             return free
         return constrained_motion(self, q, qdot, t, args, free, check=bool(check))[0]
@@ -199,15 +210,18 @@ class Lagrangian(AbstractSystem):
         if self.constraints is None:
             raise ValueError("this Lagrangian has no constraints")
         check_same_structure(q, qdot, "q", "qdot")
-        free = euler_lagrange_acceleration(
-            self._call_unchecked,
-            q,
-            qdot,
-            t,
-            args,
-            self.generalized_force(q, qdot, t, args),
-        )
+        free = self._free_acceleration(q, qdot, t, args, check=True)
         return constrained_motion(self, q, qdot, t, args, free, check=True)
+
+    def _free_acceleration(self, q, qdot, t, args, *, check):
+        """q̈ without constraint forces, by this Lagrangian's `formulation`."""
+        derive = (
+            network_euler_lagrange_acceleration
+            if self.formulation == "network"
+            else euler_lagrange_acceleration
+        )
+        force = self.generalized_force(q, qdot, t, args)
+        return derive(self._call_unchecked, q, qdot, t, args, force, check=check)
 
     def _call_unchecked(self, q, qdot, t, args):
         return call_with_arity(self.function, self.arity, q, qdot, t, args)
