@@ -1,0 +1,99 @@
+"""Implicit solvers in the fixed-step loop: failures are detected in the step without a
+run-time branch, and reported after the loop.
+
+A branch (`eqx.error_if`, a `lax.cond`) inside the step splits the loop body that
+XLA would otherwise compile as one kernel; in RATTLE it cost 14× a hand-written loop
+(`benchmarks/implicit_overhead.py`). The rule is "detect cheaply, diagnose late": a
+failure poisons the state or sets the step's `RESULTS`, and `simulate` names it.
+"""
+
+import re
+
+import diffrax
+import jax
+import jax.numpy as jnp
+import pytest
+
+import lagjax as lj
+
+GRAVITY = 9.81
+
+
+def pendulum(q, qdot):
+    return 0.5 * qdot[0] ** 2 + GRAVITY * jnp.cos(q[0])
+
+
+def particle(q, qdot):
+    return 0.5 * jnp.sum(qdot**2) - GRAVITY * q[1]
+
+
+def on_circle(q):
+    return jnp.sum(q**2) - 1.0
+
+
+def twice_on_circle(q):
+    # The same constraint twice: G has rank 1 < 2 everywhere, G M⁻¹ Gᵀ is singular.
+    return jnp.stack([on_circle(q), 2.0 * on_circle(q)])
+
+
+PENDULUM_START = (jnp.array([1.0]), jnp.array([0.5]))
+CIRCLE_START = (jnp.array([1.0, 0.0]), jnp.array([0.0, 0.5]))
+
+
+def _computations(hlo: str) -> dict[str, str]:
+    return {
+        match.group(1): match.group(0)
+        for match in re.finditer(r"\n(%[\w.\-]+) \([^\n]*\{\n.*?\n\}", hlo, re.S)
+    }
+
+
+def _reachable(name: str, computations: dict[str, str]) -> set[str]:
+    seen, todo = set(), [name]
+    while todo:
+        current = todo.pop()
+        if current in seen or current not in computations:
+            continue
+        seen.add(current)
+        todo += re.findall(r"(%[\w.\-]+)", computations[current])
+    return seen & computations.keys()
+
+
+def _branches_in_step_loop(run, start) -> int:
+    """Conditionals inside the fixed-step loop of the compiled run."""
+    hlo = jax.jit(run).lower(start).compile().as_text()
+    computations = _computations(hlo)
+    loops = re.findall(r"while\([^\n]*body=(%[\w.\-]+)[^\n]*integrate_fixed_steps", hlo)
+    assert loops, "no fixed-step loop found"
+    inside = set().union(*(_reachable(body, computations) for body in loops))
+    return sum(computations[c].count(" conditional(") for c in inside)
+
+
+@pytest.mark.parametrize(
+    ("system", "start", "solver"),
+    [
+        (lj.Lagrangian(pendulum), PENDULUM_START, lj.GaussLegendre(stages=2)),
+        (lj.Lagrangian(pendulum), PENDULUM_START, lj.ImplicitMidpoint()),
+        (lj.Lagrangian(pendulum), PENDULUM_START, lj.VariationalMidpoint()),
+        (lj.Lagrangian(particle, constraints=on_circle), CIRCLE_START, lj.Rattle()),
+    ],
+)
+def test_step_loop_has_no_run_time_branch(system, start, solver):
+    def run(state):
+        return lj.simulate(system, state, t1=0.05, dt=0.01, solver=solver).ys
+
+    assert _branches_in_step_loop(run, start) == 0
+
+
+def test_rattle_on_redundant_constraints_reports_a_failed_run():
+    # Not a silent finite trajectory: the run stops, says it failed and why
+    # (non-finite state; with the default throw=True, simulate raises).
+    lag = lj.Lagrangian(particle, constraints=twice_on_circle)
+
+    @jax.jit
+    def verdict(start):
+        run = lj.simulate(lag, start, t1=0.1, dt=0.01, solver=lj.Rattle(), throw=False)
+        return run.stats["finite"], run.result != diffrax.RESULTS.successful
+
+    finite, failed = verdict(CIRCLE_START)
+    assert not bool(finite)
+    assert bool(failed)
