@@ -30,8 +30,9 @@ The twins, each a `lax.scan` over steps on a flat state:
   of the residual and `jnp.linalg.solve`, stopped as `optimistix.Newton` stops
   (step below 10⁻¹³(1 + |Δq|) and residual below 10⁻¹³), at most 32 iterations;
   q and p updated with Kahan summation.
-- `Rattle`: SHAKE's multiplier Λ = h²λ/2 for the one constraint by scalar Newton
-  (closed-form derivative 2 q·M⁻¹Gᵀ), from the previous step's Λ, stopped as
+- `Rattle`: SHAKE's multiplier Λ = h²λ/2 for the one constraint g = |q|² − 1 by
+  scalar Newton on g(q₀ + Δq_free − M⁻¹Gᵀ(q₀)Λ) with its closed-form derivative
+  (M = 1, Gᵀ = 2q₀), from the previous step's Λ, stopped as
   `optimistix.Newton` stops (at 10⁻¹⁴), at most 16 iterations; then the RATTLE
   momentum projection onto ġ = 0 (one scalar division); q and p updated with Kahan
   summation.
