@@ -69,6 +69,7 @@ from .solvers.lie_poisson import RigidBodyYoshida4 as RigidBodyYoshida4
 from .solvers.projection import ConstraintProjection as ConstraintProjection
 from .solvers.rattle import Rattle as Rattle
 from .solvers.splitting import BlanesMoan4 as BlanesMoan4
+from .solvers.splitting import BlanesMoan6 as BlanesMoan6
 from .solvers.splitting import KahanLi8 as KahanLi8
 from .solvers.splitting import SofSpa10 as SofSpa10
 from .solvers.splitting import StormerVerlet as StormerVerlet

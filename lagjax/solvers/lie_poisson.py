@@ -76,7 +76,7 @@ from lagjax.solvers.projection import AbstractProjectedSolver
 
 # The composition tables and the kick merging are those of the canonical splitting
 # methods: one source for Yoshida's triple jump.
-from lagjax.solvers.splitting import _YOSHIDA4_WEIGHTS, _merged_kicks
+from lagjax.solvers.splitting_tables import YOSHIDA4_WEIGHTS, merged_kicks
 from lagjax.terms import RigidBodyTerm, physical_step
 
 if TYPE_CHECKING:
@@ -185,7 +185,7 @@ def _drift_rates(split, moments, dtype):
 def _stage_table(weights, dtype):
     """Rows (weight, kick before the drift, clock at the kick) of a composition of
     kick–drift–kick steps with adjacent kicks merged, and the closing kick."""
-    kicks = _merged_kicks(weights)
+    kicks = merged_kicks(weights)
     clocks = [sum(weights[:stage]) for stage in range(len(weights))]
     return jnp.asarray([weights, kicks[:-1], clocks], dtype=dtype).T, kicks[-1]
 
@@ -361,7 +361,7 @@ class RigidBodyYoshida4(AbstractRigidBodySplitting):
         - McLachlan, Phys. Rev. Lett. 71, 3043 (1993).
     """
 
-    composition_weights: ClassVar[tuple[float, ...]] = _YOSHIDA4_WEIGHTS
+    composition_weights: ClassVar[tuple[float, ...]] = YOSHIDA4_WEIGHTS
     nominal_order: ClassVar[int] = 4
     compensated: bool = eqx.field(default=True, static=True)
     free_body: str = eqx.field(default="symmetric-top", static=True)
