@@ -1,4 +1,5 @@
-"""Linear oscillator scenes against their closed forms (scenes/oscillators.py)."""
+"""Linear oscillator scenes against their closed forms (scenes/oscillators.py,
+scenes/driven.py)."""
 
 import diffrax
 import equinox as eqx
@@ -8,12 +9,9 @@ import numpy as np
 import pytest
 
 import lagjax as lj
-from lagjax.scenes import chains, oscillators, pendulums
-from lagjax.scenes.oscillators import (
-    CoupledOscillators,
-    DampedDrivenOscillator,
-    HarmonicOscillator,
-)
+from lagjax.scenes import chains, driven, oscillators, pendulums
+from lagjax.scenes.driven import DampedDrivenOscillator
+from lagjax.scenes.oscillators import CoupledOscillators, HarmonicOscillator
 
 
 def worst_relative_errors(checks):
@@ -53,7 +51,8 @@ def autodiff_normal_modes(scene):
 
 
 @pytest.mark.parametrize(
-    "scene_class", oscillators.SCENES + pendulums.SCENES + chains.SCENES
+    "scene_class",
+    oscillators.SCENES + driven.SCENES + pendulums.SCENES + chains.SCENES,
 )
 def test_scene_convention(scene_class):
     scene = scene_class()

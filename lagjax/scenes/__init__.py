@@ -20,6 +20,7 @@ from .constrained import CartesianAtwoodMachine as CartesianAtwoodMachine
 from .constrained import CartesianPendulum as CartesianPendulum
 from .constrained import CartesianRotatingWireBead as CartesianRotatingWireBead
 from .constrained import RollingDisk as RollingDisk
+from .driven import DampedDrivenOscillator as DampedDrivenOscillator
 from .earth import EastwardDeflection as EastwardDeflection
 from .earth import FoucaultPendulum as FoucaultPendulum
 from .earth import PlumbLine as PlumbLine
@@ -27,7 +28,6 @@ from .fields import AtwoodMachine as AtwoodMachine
 from .fields import ChargeInUniformFields as ChargeInUniformFields
 from .fields import FreeFall as FreeFall
 from .oscillators import CoupledOscillators as CoupledOscillators
-from .oscillators import DampedDrivenOscillator as DampedDrivenOscillator
 from .oscillators import HarmonicOscillator as HarmonicOscillator
 from .pendulums import DoublePendulum as DoublePendulum
 from .pendulums import SimplePendulum as SimplePendulum

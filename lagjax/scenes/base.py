@@ -26,9 +26,17 @@ before vmapping over it (e.g. build one scene from its extremes).
 amplitudes, tilts): pass `math.radians(45)`, not `45`. Angle parameters with a
 bounded range reject a value in degrees with a hint.
 
+**Coordinates.** A scene names its coordinates and their units
+(`coordinate_names`, `coordinate_units`, `time_unit`; `coordinates()` gives one
+name and one unit per entry of q flattened), so that plots and tables read like
+physics: "θ [rad]", "x [m]" rather than "q[0]". Undeclared names are `q[i]` with no
+unit.
+
 A scene holds physics and known answers only: no derivation, no integration.
 `checks(trajectory)` compares what a run measured with the scene's closed forms, for
-the command line and notebooks.
+the command line and notebooks; `diagnostic(trajectory)`, where a scene has one, is
+the one curve that shows its physics along a run (the Foucault pendulum's swing
+plane turning at −ω_E sin φ, say), measured against its closed form.
 """
 
 from __future__ import annotations
@@ -37,13 +45,14 @@ import abc
 import dataclasses
 import math
 from collections.abc import Callable
-from typing import Any, ClassVar, Literal
+from typing import Any, ClassVar, Literal, NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.core import Tracer
+from jax.flatten_util import ravel_pytree
 
 from lagjax.mechanics.hamiltonian import AbstractHamiltonian
 from lagjax.mechanics.lagrangian import Lagrangian
@@ -179,6 +188,29 @@ def concrete(*values: Any) -> list[np.ndarray] | None:
     return [np.asarray(value) for value in values]
 
 
+_SUBSCRIPTS = str.maketrans("0123456789", "₀₁₂₃₄₅₆₇₈₉")
+
+
+def numbered(symbol: str, size: int) -> tuple[str, ...]:
+    """`symbol` with subscripts 1 … size: `numbered("x", 3)` → ("x₁", "x₂", "x₃")."""
+    return tuple(f"{symbol}{str(i).translate(_SUBSCRIPTS)}" for i in range(1, size + 1))
+
+
+class Diagnostic(NamedTuple):
+    """One quantity measured along a run, against its closed form where known.
+
+    `label` names the quantity and its unit ("swing-plane angle [rad]"); `measured`
+    and `expected` (or None) are sampled at the saved times `ts`;
+    `expected_label` names the closed form ("−ω_E sin φ · t").
+    """
+
+    label: str
+    ts: jax.Array
+    measured: jax.Array
+    expected: jax.Array | None = None
+    expected_label: str = "closed form"
+
+
 class AbstractScene(AbstractSystem):
     """Base of all scenes. Subclasses are final equinox Modules.
 
@@ -189,6 +221,11 @@ class AbstractScene(AbstractSystem):
     - `state_kind`: what `initial_state()` returns besides q — `"velocity"` for
       (q, q̇) when `system()` is a `Lagrangian`, `"momentum"` for (q, p) when it is
       a Hamiltonian. Tests and the command line use it to read a run's state.
+    - `coordinate_names`, `coordinate_units`: one plain-text (Unicode) name and
+      unit per entry of q flattened, e.g. `("θ",)` and `("rad",)`; a scene whose
+      number of coordinates is a parameter overrides `coordinates()` instead.
+      Left empty, they read `q[i]` and no unit. `time_unit`: "s" unless the scene
+      is dimensionless.
 
     Parameters are fields declared with `parameter()`, validated when concrete.
     """
@@ -196,6 +233,9 @@ class AbstractScene(AbstractSystem):
     default_t1: ClassVar[float]
     default_dt: ClassVar[float]
     state_kind: ClassVar[StateKind]
+    coordinate_names: ClassVar[tuple[str, ...]] = ()
+    coordinate_units: ClassVar[tuple[str, ...]] = ()
+    time_unit: ClassVar[str] = "s"
 
     def __check_init__(self) -> None:
         for field in dataclasses.fields(self):
@@ -263,3 +303,27 @@ class AbstractScene(AbstractSystem):
         """
         del trajectory
         return {}
+
+    def coordinates(self) -> tuple[tuple[str, ...], tuple[str, ...]]:
+        """(names, units): one each per entry of q flattened, in that order.
+
+        From `coordinate_names` and `coordinate_units`; `q[i]` and "" where a
+        scene declares none. A declaration of the wrong length raises.
+        """
+        size = int(ravel_pytree(self.initial_state()[0])[0].size)
+        names = self.coordinate_names or tuple(f"q[{i}]" for i in range(size))
+        units = self.coordinate_units or ("",) * size
+        if len(names) != size or len(units) != size:
+            raise ValueError(
+                f"{type(self).__name__} has {size} coordinates but declares "
+                f"{len(names)} names and {len(units)} units"
+            )
+        return names, units
+
+    def diagnostic(self, trajectory: Any) -> Diagnostic | None:
+        """The curve that shows this scene's physics along a saved run, or None.
+
+        The default has none (the command then shows the energy error alone).
+        """
+        del trajectory
+        return None

@@ -32,7 +32,13 @@ import jax.numpy as jnp
 
 from lagjax.mechanics.hamiltonian import SeparableHamiltonian
 from lagjax.mechanics.lagrangian import Lagrangian
-from lagjax.scenes.base import AbstractScene, Interval, StateKind, parameter
+from lagjax.scenes.base import (
+    AbstractScene,
+    Diagnostic,
+    Interval,
+    StateKind,
+    parameter,
+)
 
 # Newton's method on Kepler's equation started at 𝓔 = π converges monotonically for
 # mean anomalies in [0, π] (the equation is increasing and convex there); 50
@@ -164,6 +170,20 @@ class AbstractKeplerProblem(AbstractScene):
             ),
         }
 
+    def diagnostic(self, trajectory) -> Diagnostic:
+        """The angular momentum ℓ_z along the run against its constant value."""
+        position, velocity = self.cartesian_state(trajectory.q, trajectory.qdot)
+        angular = self.mass * (
+            position[..., 0] * velocity[..., 1] - position[..., 1] * velocity[..., 0]
+        )
+        return Diagnostic(
+            "angular momentum ℓ_z [kg m²/s]",
+            trajectory.ts,
+            angular,
+            self.angular_momentum() * jnp.ones_like(angular),
+            "m √(μ a (1 − e²))",
+        )
+
 
 def _cartesian_kinetic(p, t, scene):
     return 0.5 * jnp.sum(p**2) / scene.mass
@@ -192,6 +212,8 @@ class KeplerCartesian(AbstractKeplerProblem):
     mass: jax.Array = parameter(1.0, positive=True)
 
     state_kind: ClassVar[StateKind] = "momentum"
+    coordinate_names: ClassVar[tuple[str, ...]] = ("x", "y")
+    coordinate_units: ClassVar[tuple[str, ...]] = ("m", "m")
 
     def system(self) -> SeparableHamiltonian:
         return SeparableHamiltonian(_cartesian_kinetic, _cartesian_potential)
@@ -229,6 +251,8 @@ class KeplerPolar(AbstractKeplerProblem):
     mass: jax.Array = parameter(1.0, positive=True)
 
     state_kind: ClassVar[StateKind] = "velocity"
+    coordinate_names: ClassVar[tuple[str, ...]] = ("r", "θ")
+    coordinate_units: ClassVar[tuple[str, ...]] = ("m", "rad")
 
     def system(self) -> Lagrangian:
         return Lagrangian(_polar_lagrangian, quadratic_in_velocity=True)

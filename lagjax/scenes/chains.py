@@ -27,7 +27,7 @@ import jax
 import jax.numpy as jnp
 
 from lagjax.mechanics.hamiltonian import SeparableHamiltonian
-from lagjax.scenes.base import AbstractScene, StateKind, count, parameter
+from lagjax.scenes.base import AbstractScene, StateKind, count, numbered, parameter
 from lagjax.scenes.oscillators import normal_mode_motion
 
 ATOMIC_MASS_UNIT = 1.66053906660e-27  # kg, CODATA 2018
@@ -79,6 +79,8 @@ class LinearTriatomicMolecule(AbstractScene):
     default_t1: ClassVar[float] = 1e-12
     default_dt: ClassVar[float] = 5e-17
     state_kind: ClassVar[StateKind] = "momentum"
+    coordinate_names: ClassVar[tuple[str, ...]] = ("η₁", "η₂", "η₃")
+    coordinate_units: ClassVar[tuple[str, ...]] = ("m", "m", "m")
 
     def system(self) -> SeparableHamiltonian:
         return SeparableHamiltonian(_kinetic, _triatomic_potential)
@@ -170,6 +172,10 @@ class SpringChain(AbstractScene):
     default_dt: ClassVar[float] = 0.0025
     state_kind: ClassVar[StateKind] = "momentum"
 
+    def coordinates(self) -> tuple[tuple[str, ...], tuple[str, ...]]:
+        """q₁ … q_N, displacements from equilibrium in m."""
+        return numbered("q", self.size), ("m",) * self.size
+
     def system(self) -> SeparableHamiltonian:
         return SeparableHamiltonian(_kinetic, _chain_potential)
 
@@ -254,6 +260,11 @@ class FermiPastaUlamChain(AbstractScene):
     default_t1: ClassVar[float] = 200.0
     default_dt: ClassVar[float] = 0.02
     state_kind: ClassVar[StateKind] = "momentum"
+    time_unit: ClassVar[str] = ""  # dimensionless, as in GNI
+
+    def coordinates(self) -> tuple[tuple[str, ...], tuple[str, ...]]:
+        """q₁ … q₂ₘ, dimensionless (GNI's units)."""
+        return numbered("q", 2 * self.pairs), ("",) * (2 * self.pairs)
 
     def system(self) -> SeparableHamiltonian:
         return SeparableHamiltonian(_kinetic, _fpu_potential)

@@ -36,6 +36,7 @@ from lagjax.mechanics.lagrangian import Lagrangian
 from lagjax.scenes.base import (
     BELOW_THE_TOP,
     AbstractScene,
+    Diagnostic,
     Interval,
     StateKind,
     parameter,
@@ -84,6 +85,8 @@ class CartesianPendulum(AbstractScene):
     default_t1: ClassVar[float] = 5.0
     default_dt: ClassVar[float] = 0.005
     state_kind: ClassVar[StateKind] = "velocity"
+    coordinate_names: ClassVar[tuple[str, ...]] = ("x", "y")
+    coordinate_units: ClassVar[tuple[str, ...]] = ("m", "m")
 
     def system(self) -> Lagrangian:
         return Lagrangian(_free_mass_in_gravity, constraints=_rod)
@@ -107,6 +110,16 @@ class CartesianPendulum(AbstractScene):
             "tension": (tension, self.tension(trajectory.q)),
             "rod length": (length, self.length * jnp.ones_like(length)),
         }
+
+    def diagnostic(self, trajectory) -> Diagnostic:
+        """The rod's tension, −λ, against mg(3 cos θ − 2 cos θ₀)."""
+        return Diagnostic(
+            "rod tension T = −λ [N]",
+            trajectory.ts,
+            -_multipliers_along(trajectory, self)[..., 0],
+            self.tension(trajectory.q),
+            "mg(3 cos θ − 2 cos θ₀)",
+        )
 
 
 # --- Atwood's machine with both heights ----------------------------------------------
@@ -144,6 +157,8 @@ class CartesianAtwoodMachine(AbstractScene):
     default_t1: ClassVar[float] = 0.5
     default_dt: ClassVar[float] = 0.5 / 400
     state_kind: ClassVar[StateKind] = "velocity"
+    coordinate_names: ClassVar[tuple[str, ...]] = ("y₁", "y₂")
+    coordinate_units: ClassVar[tuple[str, ...]] = ("m", "m")
 
     def system(self) -> Lagrangian:
         return Lagrangian(_two_hanging_masses, constraints=_rope)
@@ -210,6 +225,8 @@ class CartesianRotatingWireBead(AbstractScene):
     default_t1: ClassVar[float] = 2.0
     default_dt: ClassVar[float] = 1e-3
     state_kind: ClassVar[StateKind] = "velocity"
+    coordinate_names: ClassVar[tuple[str, ...]] = ("x", "y")
+    coordinate_units: ClassVar[tuple[str, ...]] = ("m", "m")
 
     def generalized(self) -> BeadOnRotatingWire:
         """The same bead in the generalized coordinate r (closed forms)."""
@@ -330,6 +347,8 @@ class RollingDisk(AbstractScene):
     default_t1: ClassVar[float] = 3.0
     default_dt: ClassVar[float] = 1e-3
     state_kind: ClassVar[StateKind] = "velocity"
+    coordinate_names: ClassVar[tuple[str, ...]] = ("x", "y", "θ", "φ", "ψ")
+    coordinate_units: ClassVar[tuple[str, ...]] = ("m", "m", "rad", "rad", "rad")
 
     def moments(self) -> tuple[jax.Array, jax.Array]:
         """(I₁ about a diameter, I₃ about the axis) of a thin uniform disk."""

@@ -21,7 +21,13 @@ import jax.numpy as jnp
 from jax.typing import ArrayLike
 
 from lagjax.mechanics.lagrangian import Lagrangian
-from lagjax.scenes.base import LATITUDE, AbstractScene, StateKind, parameter
+from lagjax.scenes.base import (
+    LATITUDE,
+    AbstractScene,
+    Diagnostic,
+    StateKind,
+    parameter,
+)
 from lagjax.scenes.judging import measured
 from lagjax.scenes.rotating import rotating_kinetic_energy
 
@@ -110,6 +116,8 @@ class FoucaultPendulum(AbstractScene):
     default_t1: ClassVar[float] = 300.0
     default_dt: ClassVar[float] = 0.05
     state_kind: ClassVar[StateKind] = "velocity"
+    coordinate_names: ClassVar[tuple[str, ...]] = ("x (south)", "y (east)")
+    coordinate_units: ClassVar[tuple[str, ...]] = ("m", "m")
 
     def system(self) -> Lagrangian:
         return Lagrangian(_foucault_lagrangian, quadratic_in_velocity=True)
@@ -161,6 +169,18 @@ class FoucaultPendulum(AbstractScene):
             )
         }
 
+    def diagnostic(self, trajectory) -> Diagnostic:
+        """The swing plane's turn since the start against −ω_E sin φ · t."""
+        angle = self.plane_angle(trajectory.q, trajectory.qdot)
+        elapsed = trajectory.ts - trajectory.ts[0]
+        return Diagnostic(
+            "swing-plane angle θ(t) − θ(0) [rad]",
+            trajectory.ts,
+            angle - angle[0],
+            self.precession_rate() * elapsed,
+            "−ω_E sin φ · t",
+        )
+
 
 class EastwardDeflection(AbstractScene):
     r"""A body dropped from rest at height h, in the local Earth frame (south, east, up).
@@ -190,6 +210,8 @@ class EastwardDeflection(AbstractScene):
     default_t1: ClassVar[float] = 4.5  # ≈ √(2h/g) for h = 100 m
     default_dt: ClassVar[float] = 0.01
     state_kind: ClassVar[StateKind] = "velocity"
+    coordinate_names: ClassVar[tuple[str, ...]] = ("x (south)", "y (east)", "z (up)")
+    coordinate_units: ClassVar[tuple[str, ...]] = ("m", "m", "m")
 
     def system(self) -> Lagrangian:
         return Lagrangian(_local_earth_lagrangian, quadratic_in_velocity=True)
@@ -222,6 +244,16 @@ class EastwardDeflection(AbstractScene):
         return {
             "eastward deflection": (trajectory.q[-1, 1], self.eastward_deflection(t))
         }
+
+    def diagnostic(self, trajectory) -> Diagnostic:
+        """The eastward drift y(t) against ⅓ ω_E g t³ cos φ."""
+        return Diagnostic(
+            "eastward drift y [m]",
+            trajectory.ts,
+            trajectory.q[:, 1],
+            self.eastward_deflection(trajectory.ts),
+            "⅓ ω_E g t³ cos φ",
+        )
 
 
 def _plumb_lagrangian(q, qdot, t, scene):
@@ -266,6 +298,8 @@ class PlumbLine(AbstractScene):
     default_t1: ClassVar[float] = 10.0
     default_dt: ClassVar[float] = 0.01
     state_kind: ClassVar[StateKind] = "velocity"
+    coordinate_names: ClassVar[tuple[str, ...]] = ("x (south)", "y (east)")
+    coordinate_units: ClassVar[tuple[str, ...]] = ("m", "m")
 
     def system(self) -> Lagrangian:
         return Lagrangian(_plumb_lagrangian, quadratic_in_velocity=True)

@@ -47,6 +47,8 @@ class AbstractUniformAcceleration(AbstractScene):
     initial_velocity: eqx.AbstractVar[jax.Array]
 
     state_kind: ClassVar[StateKind] = "momentum"
+    coordinate_names: ClassVar[tuple[str, ...]] = ("y",)
+    coordinate_units: ClassVar[tuple[str, ...]] = ("m",)
 
     @abc.abstractmethod
     def acceleration(self) -> jax.Array:
@@ -246,6 +248,8 @@ class ChargeInUniformFields(AbstractScene):
     default_t1: ClassVar[float] = 3 * 2 * jnp.pi
     default_dt: ClassVar[float] = 3 * 2 * jnp.pi / 400  # 401 saved points on steps
     state_kind: ClassVar[StateKind] = "velocity"
+    coordinate_names: ClassVar[tuple[str, ...]] = ("x", "y", "z")
+    coordinate_units: ClassVar[tuple[str, ...]] = ("m", "m", "m")
 
     def __check_init__(self):
         values = concrete(self.charge, self.magnetic_field)

@@ -74,6 +74,8 @@ class SimplePendulum(AbstractScene):
     default_t1: ClassVar[float] = 5.0
     default_dt: ClassVar[float] = 0.01
     state_kind: ClassVar[StateKind] = "momentum"
+    coordinate_names: ClassVar[tuple[str, ...]] = ("θ",)
+    coordinate_units: ClassVar[tuple[str, ...]] = ("rad",)
 
     def system(self) -> SeparableHamiltonian:
         return SeparableHamiltonian(_pendulum_kinetic, _pendulum_potential)
@@ -163,6 +165,8 @@ class DoublePendulum(AbstractScene):
     default_t1: ClassVar[float] = 10.0
     default_dt: ClassVar[float] = 0.0025
     state_kind: ClassVar[StateKind] = "velocity"
+    coordinate_names: ClassVar[tuple[str, ...]] = ("θ₁", "θ₂")
+    coordinate_units: ClassVar[tuple[str, ...]] = ("rad", "rad")
 
     def system(self) -> Lagrangian:
         return Lagrangian(_double_pendulum_lagrangian, quadratic_in_velocity=True)

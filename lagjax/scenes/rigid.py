@@ -108,6 +108,8 @@ class TorqueFreeBody(AbstractScene):
     default_t1: ClassVar[float] = 60.0
     default_dt: ClassVar[float] = 0.01
     state_kind: ClassVar[StateKind] = "velocity"
+    coordinate_names: ClassVar[tuple[str, ...]] = ("φ", "θ", "ψ")
+    coordinate_units: ClassVar[tuple[str, ...]] = ("rad", "rad", "rad")
 
     def system(self) -> Lagrangian:
         return Lagrangian(_free_body_lagrangian, quadratic_in_velocity=True)
@@ -207,6 +209,8 @@ class HeavySymmetricTop(AbstractScene):
     default_t1: ClassVar[float] = 5.0
     default_dt: ClassVar[float] = 1e-3
     state_kind: ClassVar[StateKind] = "velocity"
+    coordinate_names: ClassVar[tuple[str, ...]] = ("φ", "θ", "ψ")
+    coordinate_units: ClassVar[tuple[str, ...]] = ("rad", "rad", "rad")
 
     def system(self) -> Lagrangian:
         return Lagrangian(_heavy_top_lagrangian, quadratic_in_velocity=True)
@@ -286,6 +290,8 @@ class EarthFreePrecession(AbstractScene):
     default_t1: ClassVar[float] = 400 * DAY
     default_dt: ClassVar[float] = 1200.0
     state_kind: ClassVar[StateKind] = "velocity"
+    coordinate_names: ClassVar[tuple[str, ...]] = ("φ", "θ", "ψ")
+    coordinate_units: ClassVar[tuple[str, ...]] = ("rad", "rad", "rad")
 
     def body(self) -> TorqueFreeBody:
         """The same motion as a `TorqueFreeBody` (moments in units of A)."""

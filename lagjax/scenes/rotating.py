@@ -100,6 +100,8 @@ class AbstractMovingFrameParticle(AbstractScene):
     default_t1: ClassVar[float] = 3.0
     default_dt: ClassVar[float] = 1e-3
     state_kind: ClassVar[StateKind] = "velocity"
+    coordinate_names: ClassVar[tuple[str, ...]] = ("x′", "y′", "z′")
+    coordinate_units: ClassVar[tuple[str, ...]] = ("m", "m", "m")
 
     @abc.abstractmethod
     def to_inertial(self, position: jax.Array, t: ArrayLike) -> jax.Array:
@@ -248,6 +250,8 @@ class BeadOnRotatingWire(AbstractScene):
     default_t1: ClassVar[float] = 2.0
     default_dt: ClassVar[float] = 1e-3
     state_kind: ClassVar[StateKind] = "velocity"
+    coordinate_names: ClassVar[tuple[str, ...]] = ("r",)
+    coordinate_units: ClassVar[tuple[str, ...]] = ("m",)
 
     def system(self) -> Lagrangian:
         return Lagrangian(_wire_lagrangian, quadratic_in_velocity=True)
