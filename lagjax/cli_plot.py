@@ -1,15 +1,22 @@
-"""The figure of `lagjax run --plot`: the motion, the energy, and the scene's check.
+"""The figure of `lagjax run --plot`: the motion, the scene's physics, the energy.
 
-Three panels that read like a lab notebook:
+Panels that read like a lab notebook, top to bottom:
 
-1. the coordinates against time — the whole run when it holds few swings, else
-   its first swings (a long run drawn whole is a solid band);
-2. the relative energy error |E − E₀|/|E₀| on a log scale, over the whole run;
-3. where the scene has closed-form checks (`scene.checks(trajectory)`), each
-   scalar check measured on each sixth of the run against its closed form: e.g.
-   the Foucault pendulum's precession rate fitted on each part against
-   −ω_E sin φ, the pendulum's period, the eastward deflection at the end of each
-   part against ⅓ω_E g t³ cos φ — a drift along the run shows at a glance.
+1. the coordinates against time, named and in their units as the scene declares
+   them (`AbstractScene.coordinates()`: θ [rad], x [m], …), one panel per unit —
+   the whole run when it holds few swings, else its first swings (a long run drawn
+   whole is a solid band);
+2. the scene's own diagnostic where it has one (`scene.diagnostic(trajectory)`):
+   e.g. the Foucault pendulum's swing-plane angle against −ω_E sin φ · t, Kepler's
+   angular momentum against its constant, the eastward drift against
+   ⅓ ω_E g t³ cos φ;
+3. the relative energy change |E − E₀|/|E₀| on a log scale over the whole run —
+   the integration error where the energy is conserved (left out for a scene
+   with forces, friction or constraints whose diagnostic shows its physics);
+4. where the scene has scalar closed-form checks (`scene.checks(trajectory)`), each
+   one measured on each sixth of the run against its closed form: the Foucault
+   precession rate, the pendulum's period, … — a drift along the run shows at a
+   glance.
 
 matplotlib is imported here only, so the command runs without it unless a plot is
 asked for.
@@ -27,6 +34,7 @@ from jax.flatten_util import ravel_pytree
 # The run is cut into this many equal parts, and each scalar check measured on each.
 _SEGMENTS = 6
 _MAX_SWINGS_SHOWN = 12
+_PANEL_HEIGHT = 2.4  # inches
 
 
 def plot_run(path: str, name: str, scene: Any, trajectory: Any) -> None:
@@ -36,30 +44,73 @@ def plot_run(path: str, name: str, scene: Any, trajectory: Any) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    ts = np.asarray(trajectory.ts)
-    flat_q = np.asarray(jax.vmap(lambda q: ravel_pytree(q)[0])(trajectory.q))
-    checks = _check_series(scene, trajectory)
-    rows = 3 if checks else 2
-    figure, axes = plt.subplots(rows, 1, figsize=(8, 2.6 * rows + 0.6))
-    _plot_coordinates(axes[0], ts, flat_q)
-    axes[0].set_title(f"lagjax run {name}")
-    _plot_energy(axes[1], ts, np.asarray(trajectory.energy()))
-    if checks:
-        _plot_checks(axes[2], checks)
-    figure.tight_layout()
+    figure = run_figure(name, scene, trajectory)
     figure.savefig(path, dpi=120)
     plt.close(figure)
 
 
-def _plot_coordinates(axis, ts: np.ndarray, flat_q: np.ndarray) -> None:
+def run_figure(name: str, scene: Any, trajectory: Any) -> Any:
+    """The figure of one trajectory (a matplotlib `Figure`; the caller closes it)."""
+    import matplotlib.pyplot as plt
+
+    ts = np.asarray(trajectory.ts)
+    flat_q = np.asarray(jax.vmap(lambda q: ravel_pytree(q)[0])(trajectory.q))
+    groups = unit_groups(*scene.coordinates())
+    diagnostic = scene.diagnostic(trajectory)
+    checks = _check_series(scene, trajectory)
+    # The energy error where the energy is conserved, or where the scene has no
+    # curve of its own to show; not the decay of a damped run beside its closed form.
+    energy = diagnostic is None or scene.conserves_energy_if_autonomous()
+    rows = len(groups) + (diagnostic is not None) + energy + bool(checks)
+    figure, axes = plt.subplots(
+        rows, 1, figsize=(8, _PANEL_HEIGHT * rows + 0.6), squeeze=False
+    )
+    panels = iter(axes[:, 0])
+    time_label = _with_unit("t", scene.time_unit)
     shown = _first_swings(ts, flat_q)
-    for index in range(flat_q.shape[1]):
-        axis.plot(ts[:shown], flat_q[:shown, index], label=f"q[{index}]")
-    if flat_q.shape[1] <= 8:
+    for unit, members in groups.items():
+        axis = next(panels)
+        _plot_coordinates(axis, ts[:shown], flat_q[:shown], members, unit)
+        span = "whole run" if shown == ts.size else f"first {shown} of {ts.size} saves"
+        axis.set_xlabel(f"{time_label}  ({span})")
+    summary = (type(scene).__doc__ or "").strip().splitlines()[0]
+    axes[0, 0].set_title(f"lagjax run {name}\n{summary}", fontsize="medium")
+    if diagnostic is not None:
+        _plot_diagnostic(next(panels), diagnostic, time_label)
+    if energy:
+        _plot_energy(next(panels), ts, np.asarray(trajectory.energy()), time_label)
+    if checks:
+        _plot_checks(next(panels), checks, time_label)
+    figure.tight_layout()
+    return figure
+
+
+def unit_groups(
+    names: tuple[str, ...], units: tuple[str, ...]
+) -> dict[str, list[tuple[int, str]]]:
+    """{unit: [(index in q flattened, name), …]}: coordinates that share an axis.
+
+    Lengths and angles on one axis would squash one of them flat; each unit gets a
+    panel of its own, in the order the units first appear.
+    """
+    groups: dict[str, list[tuple[int, str]]] = {}
+    for index, (name, unit) in enumerate(zip(names, units, strict=True)):
+        groups.setdefault(unit, []).append((index, name))
+    return groups
+
+
+def _with_unit(label: str, unit: str) -> str:
+    return f"{label} [{unit}]" if unit else label
+
+
+def _plot_coordinates(axis, ts, flat_q, members, unit: str) -> None:
+    for index, name in members:
+        axis.plot(ts, flat_q[:, index], label=name)
+    if len(members) <= 8:
         axis.legend(loc="upper right", fontsize="small")
-    axis.set_ylabel("coordinates q (scene units)")
-    span = "whole run" if shown == ts.size else f"first {shown} of {ts.size} saves"
-    axis.set_xlabel(f"t [s]  ({span})")
+    names = ", ".join(name for _, name in members)
+    shown = names if len(members) <= 4 else "coordinates"
+    axis.set_ylabel(_with_unit(shown, unit))
 
 
 def _first_swings(ts: np.ndarray, flat_q: np.ndarray) -> int:
@@ -76,12 +127,41 @@ def _first_swings(ts: np.ndarray, flat_q: np.ndarray) -> int:
     return int(crossings[limit]) + 1
 
 
-def _plot_energy(axis, ts: np.ndarray, energy: np.ndarray) -> None:
+def _plot_diagnostic(axis, diagnostic, time_label: str) -> None:
+    ts, measured = np.asarray(diagnostic.ts), np.asarray(diagnostic.measured)
+    # The two curves usually lie on top of each other: the legend gives the gap.
+    label = "measured"
+    if diagnostic.expected is not None:
+        expected = np.asarray(diagnostic.expected)
+        label += f" (max |measured − closed form| = {np.max(np.abs(measured - expected)):.2g})"
+    axis.plot(ts, measured, label=label)
+    if diagnostic.expected is not None:
+        axis.plot(ts, expected, "--", color="k", lw=1, label=diagnostic.expected_label)
+    axis.legend(loc="best", fontsize="small")
+    # The label names the quantity and ends with its unit, "… [rad]": the whole of
+    # it as the panel's title, the unit on the axis.
+    _, bracket, unit = diagnostic.label.rpartition(" [")
+    axis.set_ylabel(f"[{unit}" if bracket else "")
+    axis.set_title(diagnostic.label, fontsize="small")
+    axis.set_xlabel(time_label)
+
+
+def _plot_energy(axis, ts: np.ndarray, energy: np.ndarray, time_label: str) -> None:
+    """The relative change at each save, and its running maximum: a plateau is a
+    bounded error (a symplectic solver's), a rising line a drift."""
     scale = max(abs(float(energy[0])), 1e-300)
-    error = np.abs(energy[1:] - energy[0]) / scale + 1e-17
-    axis.semilogy(ts[1:], error)
-    axis.set_xlabel("t [s]")
+    # Round-off: a change below half an ulp of E₀ is drawn on that floor, not at 0.
+    floor = np.finfo(energy.dtype).eps / 2
+    error = np.maximum(np.abs(energy[1:] - energy[0]) / scale, floor)
+    axis.semilogy(ts[1:], error, lw=0.6, alpha=0.5, label="at each save")
+    axis.semilogy(ts[1:], np.maximum.accumulate(error), lw=1.5, label="largest so far")
+    axis.legend(loc="lower right", fontsize="small")
+    axis.set_xlabel(time_label)
     axis.set_ylabel("|E − E₀| / |E₀|")
+    axis.set_title(
+        "energy: relative change (the integration error where E is conserved)",
+        fontsize="small",
+    )
 
 
 def _check_series(scene: Any, trajectory: Any) -> dict[str, tuple]:
@@ -120,11 +200,15 @@ def _check_series(scene: Any, trajectory: Any) -> dict[str, tuple]:
     return {key: tuple(np.asarray(v) for v in value) for key, value in series.items()}
 
 
-def _plot_checks(axis, checks: dict[str, tuple]) -> None:
-    for index, (check, (times, measured, expected)) in enumerate(checks.items()):
-        colour = f"C{index}"
-        axis.plot(times, measured, "o-", color=colour, ms=3, label=f"{check}: measured")
-        axis.plot(times, expected, "--", color=colour, label=f"{check}: closed form")
-    axis.set_xlabel(f"end of each 1/{_SEGMENTS} of the run, t [s]")
-    axis.set_ylabel("check on that part")
+def _plot_checks(axis, checks: dict[str, tuple], time_label: str) -> None:
+    """Each check's relative deviation from its closed form, part by part: one
+    scale for checks of different units, and no offset notation for values that
+    agree to many digits."""
+    for check, (times, measured, expected) in checks.items():
+        scale = np.maximum(np.abs(expected), 1e-300)
+        axis.plot(times, (measured - expected) / scale, "o-", ms=3, label=check)
+    axis.axhline(0.0, color="k", lw=0.8, ls="--")
+    axis.set_xlabel(f"end of each 1/{_SEGMENTS} of the run, {time_label}")
+    axis.set_ylabel("(measured − closed form)\n/ |closed form|", fontsize="small")
+    axis.set_title("the scene's checks, each measured on each part", fontsize="small")
     axis.legend(loc="best", fontsize="small")

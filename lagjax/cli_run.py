@@ -1,6 +1,10 @@
 """The run behind `lagjax run`: a scene integrated in chunks that Ctrl-C can stop.
 
-The save times (about `SAVED_POINTS`, on the step grid for fixed steps) are cut
+The save times are spaced by the scene's own time scale, its `default_dt` — fine
+enough to show each swing, since a scene's default step resolves its fastest motion
+(≥ 20 steps per shortest period, except the Fermi–Pasta–Ulam chain, stepped at
+hω ≈ 1 on purpose) — on the step grid for fixed steps, and at most
+`MAX_SAVED_POINTS` (fewer for a batch, whose every copy is saved). They are cut
 into chunks of at most `CHUNK_STEPS` fixed steps (`ADAPTIVE_CHUNKS` for adaptive
 runs); each chunk is one call of the same compiled `simulate`, started from the
 last state of the one before. Python answers Ctrl-C between chunks, so an
@@ -24,8 +28,11 @@ import numpy as np
 
 from .simulate import simulate
 
-# Saved states per run: ~20 a swing for a scene's default run, enough to see each.
-SAVED_POINTS = 2001
+# Saved states per run at most: every step of a scene's default run up to 2·10⁴
+# steps (each swing drawn with ≥ 20 points), every k-th beyond.
+MAX_SAVED_POINTS = 20_001
+# A batch saves every copy: it keeps at most this many states per copy.
+MAX_SAVED_POINTS_BATCHED = 2001
 # Fixed steps per chunk of a long run: Ctrl-C is answered between chunks.
 CHUNK_STEPS = 200_000
 ADAPTIVE_CHUNKS = 8
@@ -52,13 +59,18 @@ def _perturbed_batch(state, batch: int):
     return jax.tree_util.tree_map(spread, state)
 
 
-def _save_times(t1: float, dt: float | None) -> np.ndarray:
-    """About SAVED_POINTS times; on the step grid for fixed steps, so the saved
-    states are the solver's own, not interpolated between steps."""
+def _save_times(t1: float, dt: float | None, spacing: float, points: int) -> np.ndarray:
+    """Times from 0 to t1 about `spacing` apart, at most `points` of them.
+
+    On the step grid for fixed steps (every k-th step, k ≥ 1), so the saved states
+    are the solver's own, not interpolated between steps.
+    """
+    wanted = int(min(points, np.ceil(abs(t1) / spacing - 1e-9) + 1))
+    wanted = max(wanted, 2)
     if dt is None:
-        return np.linspace(0.0, t1, SAVED_POINTS)
+        return np.linspace(0.0, t1, wanted)
     steps = int(np.floor(abs(t1 / dt) + 1e-9))
-    stride = max(1, steps // (SAVED_POINTS - 1))
+    stride = max(1, math.ceil(steps / (wanted - 1)))
     grid = np.arange(0, steps + 1, stride) * dt
     if abs(grid[-1] - t1) > 1e-12 * abs(t1):
         grid = np.append(grid, t1)
@@ -86,7 +98,8 @@ class Outcome:
 
 
 def run_scene(scene, t1: float, dt: float | None, solver, batch: int | None) -> Outcome:
-    pieces = _pieces(_save_times(t1, dt), dt)
+    points = MAX_SAVED_POINTS if batch is None else MAX_SAVED_POINTS_BATCHED
+    pieces = _pieces(_save_times(t1, dt, scene.default_dt, points), dt)
     longest = max(abs(p[-1] - p[0]) for p in pieces)
     max_steps = None if dt is None else int(longest / abs(dt)) + 3
 
