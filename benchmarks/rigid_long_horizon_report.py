@@ -20,7 +20,9 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
+from matplotlib.ticker import NullFormatter
 
+from benchmarks import palette
 from lagjax import diagnostics
 
 LIE_POISSON = "Lie–Poisson"
@@ -120,8 +122,9 @@ def point_table(records: list[dict]) -> list[str]:
     return lines
 
 
-def plot(records: list[dict], title: str, path: Path) -> None:
-    """Two panels, log-log: max |L| error and max energy error against run time."""
+def plot(records: list[dict], title: str, path: Path, caption: str = "") -> None:
+    """Two panels, log-log: max |L| error and max energy error against run time, in
+    the colours of `benchmarks.palette`; `caption` (the date, the clock) below."""
     figure, axes = plt.subplots(1, 2, figsize=(13, 5.2), constrained_layout=True)
     panels = (("momentum_error", "max |L| error along the run (relative, no unit)"),
               ("energy_error", "max energy error along the run (relative, no unit)"))  # fmt: skip
@@ -131,16 +134,44 @@ def plot(records: list[dict], title: str, path: Path) -> None:
                           key=lambda r: r["run_s"])  # fmt: skip
             # An exact zero (no round-off at all) is drawn at 1e-17, below the rest.
             errors = [max(r[quantity], 1e-17) for r in rows]
-            style = "-o" if rows[0]["family"] == LIE_POISSON else "--s"
-            ax.loglog([r["run_s"] for r in rows], errors, style, label=method, ms=4)
+            ax.loglog([r["run_s"] for r in rows], errors, label=method, ms=4,
+                      **palette.style(method))  # fmt: skip
         ax.set(
             xlabel="run time [s] (median of warm runs, compile excluded)", ylabel=ylabel
         )
         ax.grid(True, which="major", alpha=0.3)
+        ax.xaxis.set_minor_formatter(NullFormatter())  # labels 2×10⁻² … overlap
     axes[0].legend(fontsize=8, loc="best")
     figure.suptitle(title)
+    if caption:
+        figure.supxlabel(caption, fontsize=7, color="0.3")
     figure.savefig(path, dpi=120)
     plt.close(figure)
+
+
+def records_from_markdown(text: str) -> list[dict]:
+    """The points of a written report, from its "Every point" table.
+
+    Enough to redraw the figure (method, family, run time, |L| and energy errors)
+    without measuring again; values carry the table's three significant digits.
+    """
+    table = text.split("## Every point", 1)[1].strip().splitlines()[2:]
+    records = []
+    for row in table:
+        cells = [cell.strip() for cell in row.strip().strip("|").split(" | ")]
+        method, setting = cells[0], cells[1]
+        parameter, _, value = setting.partition(" = ")
+        family = (
+            LIE_POISSON if method.startswith("RigidBody") else method.split("(")[1][:-1]
+        )
+        records.append(dict(
+            method=method, family=family, parameter=parameter, value=float(value),
+            steps=int(cells[2]), run_s=float(cells[3]) / 1e3,
+            compile_s=float(cells[4]), momentum_error=float(cells[5]),
+            space_momentum_error=float(cells[6]), energy_error=float(cells[7]),
+            orthonormality=float(cells[8]), final_error=float(cells[9]),
+        ))  # fmt: skip
+    return records
 
 
 def write(out: Path, records, meta, twin) -> None:
@@ -172,4 +203,8 @@ def write(out: Path, records, meta, twin) -> None:
         writer.writerows(records)
     report = dict(meta=meta, points=records, fastest=rows, twin=twin)
     (out / "rigid_long_horizon.json").write_text(json.dumps(report, indent=1))
-    plot(records, meta["title"], out / "rigid_long_horizon.png")
+    caption = (
+        f"{meta['mode']} run, {meta['device']}, jax {meta['jax']}; run time = "
+        "wall-clock time"
+    )
+    plot(records, meta["title"], out / "rigid_long_horizon.png", caption)

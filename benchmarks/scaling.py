@@ -43,6 +43,7 @@ import matplotlib  # noqa: E402
 matplotlib.use("Agg")  # files only, no display
 import matplotlib.pyplot as plt  # noqa: E402
 
+from benchmarks import palette  # noqa: E402
 from benchmarks.scaling_size import TOLERANCE, chain_scaling, pendulum_scaling  # noqa: E402
 from benchmarks.scaling_throughput import THROUGHPUT_STEPS, throughput  # noqa: E402
 
@@ -55,7 +56,12 @@ def _write_csv(path: Path, rows: list[dict]) -> None:
         writer.writerows(rows)
 
 
-def plot(out: Path, scaling_rows: list[dict], throughput_rows: list[dict]) -> None:
+def plot(
+    out: Path, scaling_rows: list[dict], throughput_rows: list[dict], caption: str = ""
+) -> None:
+    """scaling.png: build and run time against size, throughput against batch, in
+    the colours of `benchmarks.palette` (the routes run Dopri8/DOP853, and Tsit5
+    for the throughput); `caption` (the date, the clock) below."""
     figure, (build, run, rate) = plt.subplots(1, 3, figsize=(15, 4.5))
     for route in dict.fromkeys(r["route"] for r in scaling_rows):
         for chain in (False, True):  # the 100-particle chain is a point of its own
@@ -66,12 +72,16 @@ def plot(out: Path, scaling_rows: list[dict], throughput_rows: list[dict]) -> No
             )  # fmt: skip
             if not rows:
                 continue
-            label, style = (f"{route}, FPU chain", "D") if chain else (route, "o-")
+            style = palette.style(route, method="Dopri8")
+            label = route
+            if chain:
+                label, style = f"{route}, FPU chain", {**style, "linestyle": "none",
+                                                       "marker": "D"}  # fmt: skip
             ns = [r["n"] for r in rows]
-            build.loglog(ns, [r["build_s"] for r in rows], style, label=label)
-            run.loglog(ns, [r["run_s"] for r in rows], style, label=label)
+            build.loglog(ns, [r["build_s"] for r in rows], label=label, **style)
+            run.loglog(ns, [r["run_s"] for r in rows], label=label, **style)
             for r in rows:
-                if r.get("estimated"):
+                if r.get("estimated") in (True, "True"):
                     run.plot(r["n"], r["run_s"], "kx", markersize=9)
     build.set(
         xlabel="coordinates n (n-link pendulum; n = 100: FPU chain)",
@@ -85,14 +95,16 @@ def plot(out: Path, scaling_rows: list[dict], throughput_rows: list[dict]) -> No
         rate.loglog(
             [r["batch"] for r in rows],
             [r["steps_per_s"] for r in rows],
-            "o-",
             label=route,
+            **palette.style(route, method="Tsit5"),
         )
     rate.set(xlabel="batch size", ylabel="trajectory-steps per second",
              title=f"Double pendulum, Tsit5, {THROUGHPUT_STEPS} fixed steps")  # fmt: skip
     for axes in (build, run, rate):
         axes.grid(True, alpha=0.3)
         axes.legend(fontsize=7)
+    if caption:
+        figure.supxlabel(caption, fontsize=7, color="0.3")
     figure.tight_layout()
     figure.savefig(out / "scaling.png", dpi=120)
     plt.close(figure)
