@@ -10,15 +10,15 @@ Systems, at a fixed step h = 10⁻³:
 
 - double pendulum (m = l = 1, g = 9.81) from q = (1.2, −0.4), q̇ = (0.3, 0.1);
   lagjax runs `lj.simulate(Lagrangian(L), …, dt=h, solver=…)` on the user's L (not
-  declared quadratic in q̇) — the rows GaussLegendre(stages=2), ImplicitMidpoint
-  and VariationalMidpoint;
+  declared quadratic in q̇) — the rows GaussLegendre(stages=2 and 3),
+  ImplicitMidpoint and VariationalMidpoint;
 - pendulum in Cartesian coordinates q = (x, y), L = ½|q̇|² − g y with the holonomic
   constraint x² + y² − 1 = 0, from 1 rad at 0.5 rad/s; lagjax runs
   `lj.simulate(Lagrangian(L, constraints=g), …, solver=Rattle())` — the row Rattle.
 
 The twins, each a `lax.scan` over steps on a flat state:
 
-- `GaussLegendre(stages=2)`, `ImplicitMidpoint` (Gauss–Legendre with s = 2, 1):
+- `GaussLegendre(stages=2, 3)`, `ImplicitMidpoint` (Gauss–Legendre, s = 2, 3, 1):
   Hamilton's equations in y = (θ₁, θ₂, p₁, p₂) with q̇ = M(q)⁻¹p from the
   closed-form 2×2 mass matrix; the stage increments Z = h A f(y₀ + Z) iterated by
   fixed point in a `lax.while_loop` until max |Z_new − Z| / (10⁻¹⁴(1 + |Z_new|)) < 1,
@@ -65,6 +65,7 @@ from lagjax.demo import double_pendulum as lagrangian  # noqa: E402
 from lagjax.solvers.implicit import (  # noqa: E402
     GAUSS_LEGENDRE_1,
     GAUSS_LEGENDRE_2,
+    GAUSS_LEGENDRE_3,
     CollocationTableau,
 )
 
@@ -284,6 +285,11 @@ def cases(steps: int, h: float) -> dict:
         "GaussLegendre(stages=2)": (
             lagjax_run(lj.GaussLegendre(stages=2), steps, h),
             collocation_twin(GAUSS_LEGENDRE_2, steps, h),
+            y0,
+        ),
+        "GaussLegendre(stages=3)": (
+            lagjax_run(lj.GaussLegendre(stages=3), steps, h),
+            collocation_twin(GAUSS_LEGENDRE_3, steps, h),
             y0,
         ),
         "ImplicitMidpoint": (
