@@ -18,6 +18,9 @@ twin with a nested scan. lagjax sets XLA's CPU loop threshold on import
 (`lagjax.xla_defaults`; `LAGJAX_NO_XLA_DEFAULTS=1` opts out): the header says
 whether it is in effect, and it applies to every column alike.
 
+The last column, sim/plain, is simulate over the uncompensated twin of the same
+method (for a compensated solver: what Kahan summation and the loop cost together).
+
     python -m benchmarks.solver_overhead [--steps N] [--batch B] [--repeats R] [--saves N]
 """
 
@@ -198,21 +201,23 @@ def initial_states(batch):
 
 
 def compare(solver, steps, batch, repeats, saves=None):
-    """{name: (compile seconds, median run seconds)} for diffrax and the scan twin.
-
-    The two are run alternately, so a busy machine slows both alike.
+    """{name: (compile seconds, median run seconds)} for simulate, the fixed-step
+    loop, diffeqsolve, the twin of the same method and the uncompensated ("plain")
+    twin. All are run alternately, so a busy machine slows them alike.
     """
     dt = 2 * np.pi / 100
     arguments = initial_states(batch)
     compiled, compile_seconds = {}, {}
+    plain = type(solver)(compensated=False)
     makers = (
-        ("simulate", simulate_run),
-        ("fixed", fixed_step_run),
-        ("diffrax", diffrax_run),
-        ("scan", scan_run),
+        ("simulate", simulate_run, solver),
+        ("fixed", fixed_step_run, solver),
+        ("diffrax", diffrax_run, solver),
+        ("scan", scan_run, solver),
+        ("plain scan", scan_run, plain),
     )
-    for name, make in makers:
-        function = make(solver, steps, dt, saves)
+    for name, make, method in makers:
+        function = make(method, steps, dt, saves)
         if batch is not None:
             function = jax.vmap(function)
         compiled[name], compile_seconds[name] = compile_timed(function, arguments)
@@ -230,7 +235,7 @@ def compare(solver, steps, batch, repeats, saves=None):
 def main():
     parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     parser.add_argument("--steps", type=int, default=100_000)
-    parser.add_argument("--batch", type=int, default=1024)
+    parser.add_argument("--batch", type=int, default=1024, help="0: single only")
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument(
         "--saves",
@@ -258,9 +263,9 @@ def main():
     header = f"{'solver':34s} {'batch':>6s} {'compile sim/dfx/scan [s]':>25s}"
     print(
         f"{header} {'simulate':>10s} {'diffeqsolve':>12s} {'scan':>10s} "
-        f"{'sim/scan':>8s} {'dfx/scan':>8s} {'fixed/scan':>10s}"
+        f"{'sim/scan':>8s} {'dfx/scan':>8s} {'fixed/scan':>10s} {'sim/plain':>9s}"
     )
-    for batch in (None, options.batch):
+    for batch in (None, options.batch) if options.batch else (None,):
         for label, solver in solvers.items():
             rows = compare(solver, options.steps, batch, options.repeats, options.saves)
             (c_sim, r_sim), (c_d, r_d), (c_s, r_s) = (
@@ -272,7 +277,8 @@ def main():
             print(
                 f"{label:34s} {batch or 1:6d} {compiles:>25s} {r_sim * 1e3:8.1f}ms "
                 f"{r_d * 1e3:10.1f}ms {r_s * 1e3:8.1f}ms {r_sim / r_s:8.2f} "
-                f"{r_d / r_s:8.2f} {rows['fixed'][1] / r_s:10.2f}"
+                f"{r_d / r_s:8.2f} {rows['fixed'][1] / r_s:10.2f} "
+                f"{r_sim / rows['plain scan'][1]:9.2f}"
             )
 
 
