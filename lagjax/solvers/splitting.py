@@ -345,8 +345,8 @@ class BlanesMoan6(AbstractSplittingSolver):
     D_{b_5 h} \cdots K_{a_2 h} D_{b_1 h} K_{a_1 h}.$$
 
     Like `BlanesMoan4`, not a composition of Verlet steps: its free coefficients
-    minimise the leading error terms. The cheapest method here for errors of
-    1e-8…1e-12 on an eccentric Kepler orbit (`benchmarks/kepler_saved.py`). Ten
+    minimise the leading error terms. The cheapest method here for energy errors
+    of 1e-8…1e-11 on an eccentric Kepler orbit (`benchmarks/kepler_saved.py`). Ten
     force evaluations per step.
 
     ??? cite "References"
