@@ -54,7 +54,31 @@ def test_tolerances_are_floored_at_the_dtype_resolution():
     assert math.isclose(reachable_tolerance(1e-14, np.float32), 45 * EPS32)
 
 
-@pytest.mark.parametrize("name", list(catalog()))
+# One scene per kind of run (splitting on a separable H, Gauss-Legendre on a derived
+# Lagrangian, a rotating frame, a charge in fields, Euler angles, a projected
+# constraint, a rolling constraint) in the default run; every scene under -m slow
+# (each compiles twice, 52 compiles in all).
+REPRESENTATIVE_SCENES = {
+    "harmonic-oscillator",
+    "kepler-cartesian",
+    "double-pendulum",
+    "foucault-pendulum",
+    "charge-in-uniform-fields",
+    "heavy-symmetric-top",
+    "cartesian-pendulum",
+    "rolling-disk",
+}
+
+
+@pytest.mark.parametrize(
+    "name",
+    [
+        name
+        if name in REPRESENTATIVE_SCENES
+        else pytest.param(name, marks=pytest.mark.slow)
+        for name in catalog()
+    ],
+)
 def test_every_scene_runs_in_float32(name):
     """Default solver, 20 default steps: float32 throughout, within float32 round-off."""
     scene = catalog()[name]()
