@@ -171,17 +171,15 @@ class AbstractKeplerProblem(AbstractScene):
         }
 
     def diagnostic(self, trajectory) -> Diagnostic:
-        """The angular momentum ℓ_z along the run against its constant value."""
-        position, velocity = self.cartesian_state(trajectory.q, trajectory.qdot)
-        angular = self.mass * (
-            position[..., 0] * velocity[..., 1] - position[..., 1] * velocity[..., 0]
-        )
+        """The distance from the centre along the run against Kepler's equation."""
+        position, _ = self.cartesian_state(trajectory.q, trajectory.qdot)
+        expected, _ = self.orbit_state(trajectory.ts)
         return Diagnostic(
-            "angular momentum ℓ_z [kg m²/s]",
+            "distance from the centre r [m]",
             trajectory.ts,
-            angular,
-            self.angular_momentum() * jnp.ones_like(angular),
-            "m √(μ a (1 − e²))",
+            jnp.linalg.norm(position, axis=-1),
+            jnp.linalg.norm(expected, axis=-1),
+            "a(1 − e cos E), E from Kepler's equation",
         )
 
 
