@@ -35,13 +35,15 @@ matrix with batches of vectors; one such product over the batch is a *unit*
 reverse + (n + 1) tangent + (n + 1) tangent-reverse products = 8 units at n = 2; the
 gradient with respect to the weights then costs each product twice more (its input
 adjoint and its weight gradient): ~24 units. The published route takes ~41 (XLA's
-own count, printed as GFLOP). The hand-derived MLP Hessian needs 1 + (n + 1) + 1 =
-5 forward units, ~15 with the gradient. Even granting a formulation only its
-forward units twice (no input adjoints at all) — 10 units, 84 MFLOP — the published
-step's 348 MFLOP would bound the gain at ~4×: the issue's 5× is out of reach with
-the same network, batch and precision, and the measured ceiling is the hand-derived
-row. (Also tried: a custom VJP by the adjoint of q̈'s linear system, 4 % fewer FLOPs
-but slower, its per-state weight gradients materialised under `vmap`.)
+own count, printed as MFLOP). The hand-derived MLP Hessian needs 1 + (n + 1) + 1 =
+5 forward units (the fewest found), ~15 with the gradient. Even if the gradient
+cost only the weight gradients of those 5 products (no input adjoints at all) — 10
+units, 84 MFLOP — the published step's 348 MFLOP would bound the gain at ~4×: the
+issue's 5× is out of reach with the same network, batch and precision, and the
+measured ceiling is the hand-derived row (1.9×; 1.5× for the general formulation).
+(Also tried: a custom VJP by the adjoint of q̈'s linear system — the gradient as
+one mixed second derivative λᵀ∂F/∂θ — 4 % fewer FLOPs but 4.5× slower, its
+per-state weight gradients materialised under `vmap`.)
 
 Targets are the double pendulum's exact accelerations (m = l = 1, g = 9.81) at
 random states. Compile time is reported apart; run time is the median of repeats,
