@@ -1,4 +1,15 @@
-r"""Divergence of a fixed-step run: the energy has left any sane bound.
+r"""A finished run judged after its loop: non-finite states, and divergence of a
+fixed-step run whose energy has left any sane bound.
+
+Nothing here is added to the step (a branch per step would split XLA's fused
+kernel): the loop only records, and `judge_run` looks at the saved states once,
+inside the same compiled call as the loop, and attaches the clear message
+(`eqx.error_if`) or, with `throw=False`, reports the failure in `result` and the
+stats.
+
+A saved state that is not finite (inf/NaN) fails the run. Saves that diffrax
+marks unused (t = inf, as `SaveAt(steps=True)` leaves them) are not results and
+are skipped.
 
 A fixed step beyond a method's stability limit (Störmer–Verlet on
 $\ddot q = -\omega^2 q$ needs $\omega h < 2$; an explicit Runge–Kutta method on a
@@ -27,6 +38,8 @@ from __future__ import annotations
 
 from typing import Any
 
+import diffrax
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 
@@ -84,3 +97,57 @@ DIVERGENCE_MESSAGE = (
     "an implicit or adaptive solver. Pass throw=False to inspect the run; "
     "stats['energy_drift'] holds the measured ratio."
 )
+
+
+NON_FINITE_MESSAGE = (
+    "The integration produced a non-finite state (inf/NaN). Likely causes: a "
+    "singular mass matrix (degenerate L, or a coordinate singularity such as "
+    "Euler-angle gimbal lock), a step too large for a stiff problem, or a "
+    "collision/singular potential. Pass throw=False to inspect the trajectory."
+)
+
+
+def all_saved_states_finite(saved_ts: jax.Array, ys: Any) -> jax.Array:
+    """Whether every saved state is finite; slots marked t = inf are skipped."""
+    used = jnp.isfinite(saved_ts)
+
+    def leaf_finite(x):
+        mask = used.reshape(used.shape + (1,) * (jnp.ndim(x) - used.ndim))
+        return jnp.all(jnp.isfinite(x) | ~mask)
+
+    return jnp.all(jnp.stack([leaf_finite(x) for x in jax.tree_util.tree_leaves(ys)]))
+
+
+def judge_run(
+    system: AbstractSystem,
+    start: Any,
+    t0: Any,
+    saved_ts: jax.Array,
+    ys: Any,
+    args: Any,
+    result: Any,
+    *,
+    fixed_steps: bool,
+    throw: bool,
+) -> tuple[Any, Any, dict[str, jax.Array]]:
+    """`(ys, result, stats)` of a finished run: `stats["finite"]` always, and for
+    fixed steps `stats["energy_drift"]`, with `result` set to
+    `nonlinear_divergence` when the drift is past the bound. With `throw` the
+    messages are attached to `ys` (`eqx.error_if`)."""
+    finite = all_saved_states_finite(saved_ts, ys)
+    finite = finite & (result != diffrax.RESULTS.nonfinite)
+    if throw:
+        ys = eqx.error_if(ys, ~finite, NON_FINITE_MESSAGE)
+    stats = {"finite": finite}
+    if fixed_steps:
+        # Fixed steps can outrun a method's stability limit with a finite state.
+        drift = energy_drift(system, start, t0, saved_ts, ys, args)
+        result = diffrax.RESULTS.where(
+            diverged(drift) & (result == diffrax.RESULTS.successful),
+            diffrax.RESULTS.nonlinear_divergence,  # pyright: ignore[reportArgumentType]
+            result,
+        )
+        if throw:
+            ys = eqx.error_if(ys, diverged(drift), DIVERGENCE_MESSAGE)
+        stats["energy_drift"] = drift
+    return ys, result, stats

@@ -25,6 +25,12 @@ reads states between steps (`ts` off the grid, `dense=True`, an `event`) gives a
 fixed-step solver a Hermite continuous extension (`lagjax.hermite`) for that run
 only; `Trajectory.evaluate` and event conditions see `y0`'s convention
 (`lagjax.dense_output`).
+
+The arguments are checked in Python (`lagjax.validation`), and all the numeric
+work — casting to the working precision, flattening, the loop, the diagnosis
+after it — runs as one compiled call (`_compiled_run`), so a first call compiles
+about as often as `diffeqsolve` does and a second call with another `y0` compiles
+nothing.
 """
 
 from __future__ import annotations
@@ -37,9 +43,11 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.core import Tracer
 
 from .dense_output import DenseSolution, UserState, event_in_user_state
-from .divergence import DIVERGENCE_MESSAGE, diverged, energy_drift
+from .divergence import NON_FINITE_MESSAGE as _NON_FINITE_MESSAGE
+from .divergence import judge_run
 from .fixed_step import (
     fixed_step_count,
     integrate_fixed_steps,
@@ -62,7 +70,7 @@ from .stepping import (
 )
 from .system import AbstractSystem
 from .trajectory import Trajectory
-from .validation import check_simulate_inputs
+from .validation import check_constrained_start, check_simulate_inputs
 
 System = AbstractSystem
 
@@ -146,59 +154,69 @@ def simulate(
     system, args = system.resolve(args)
     # The run works in y0's precision; float inputs follow it (lagjax.precision).
     dtype = working_dtype(y0)
+    if solver is None:
+        solver = system.default_solver(dt)
+    solver = system.adapt_solver(solver)
+    check_constrained_start(system, y0, t0, args, dtype)
+    if dt is not None or not isinstance(
+        stepsize_controller, (diffrax.AbstractAdaptiveStepSizeController, type(None))
+    ):
+        solver = with_implicit_tolerances(solver, rtol, atol)
+    run = _Run(t0, t1, dt, _save_times(ts, dtype), rtol, atol, max_steps, progress,
+               saveat, adjoint, throw, dtype, dense, event, stepsize_controller,
+               progress_meter)  # fmt: skip
+    scan = run.fits_scan()
+    return _compiled_run(system, y0, args, solver, _for_compiled_call(run, scan), scan)
+
+
+@eqx.filter_jit
+def _compiled_run(system, y0, args, solver, run: _Run, scan: bool) -> Trajectory:
+    """All the numeric work of a run as ONE compiled call: casting, flattening, the
+    loop, and the diagnosis after it (`lagjax.divergence.judge_run`).
+
+    Run eagerly, each small step before and after the loop (a cast, a ravel, a
+    finiteness test) compiled and dispatched its own XLA computation: 21
+    compilations for a first adaptive run of the double pendulum, where diffeqsolve
+    on hand-written equations needs 3. Arrays are traced arguments, so a new `y0`,
+    `args` or system parameter of the same shapes reuses the compilation; the
+    configuration — solver, saving, tolerances and the Python numbers t0, t1, dt —
+    is static, as in a hand-written jitted `diffeqsolve`: XLA compiles the adaptive
+    loop over a constant span in about half the time it takes over a traced one.
+    """
+    dtype = run.dtype
     y0, system, args = (
         cast_floats(y0, dtype),
         cast_floats(system, dtype),
         cast_floats(args, dtype),
     )
-    if ts is not None:
-        ts = jnp.asarray(ts, dtype=dtype)
-    if solver is None:
-        solver = system.default_solver(dt)
-    solver = system.adapt_solver(solver)
-    terms, state0, integrated = system.integration(solver, y0, t0, args)
+    if isinstance(run.ts, _Constant):  # the scan path (`_for_compiled_call`)
+        saveat: Any = run.saveat
+        run = run._replace(ts=run.ts.value, saveat=saveat.value)
+    elif run.ts is not None:
+        run = run._replace(ts=jnp.asarray(run.ts, dtype=dtype))
+    terms, state0, integrated = system.integration(solver, y0, run.t0, args)
     # One vector is what diffrax's loops run fastest (lagjax.flat_state).
     start = state0
-    terms, state0, flat = flattened(terms, state0, saveat)
-    if dt is not None or not isinstance(
-        stepsize_controller, (diffrax.AbstractAdaptiveStepSizeController, type(None))
-    ):
-        solver = with_implicit_tolerances(solver, rtol, atol)
+    terms, state0, flat = flattened(terms, state0, run.saveat)
     user_state = UserState.of(flat, integrated, system)
-    if event is not None:
-        event = event_in_user_state(event, user_state, dtype)
-    run = _Run(t0, t1, dt, ts, rtol, atol, max_steps, progress, saveat, adjoint,
-               throw, dtype, dense, event, stepsize_controller,
-               progress_meter)  # fmt: skip
-    integrate = _integrate_scan if run.fits_scan() else _diffeqsolve
+    if run.event is not None:
+        run = run._replace(event=event_in_user_state(run.event, user_state, dtype))
+    integrate = _integrate_scan if scan else _diffeqsolve
     saved_ts, ys, stats, result, interpolation = integrate(
         terms, solver, state0, args, run
     )
     if flat is not None:
         ys = flat.unravel(ys)
-    finite = _all_saved_states_finite(saved_ts, ys)
-    finite = finite & (result != diffrax.RESULTS.nonfinite)
-    if throw:
-        ys = eqx.error_if(ys, ~finite, _NON_FINITE_MESSAGE)
-    stats["finite"] = finite
-    if run.dt is not None and run.saveat is None:
-        # Fixed steps can outrun a method's stability limit with a finite state;
-        # judged once, after the loop (lagjax.divergence).
-        drift = energy_drift(integrated, start, t0, saved_ts, ys, args)
-        result = diffrax.RESULTS.where(
-            diverged(drift) & (result == diffrax.RESULTS.successful),
-            diffrax.RESULTS.nonlinear_divergence,  # pyright: ignore[reportArgumentType]
-            result,
-        )
-        if throw:
-            ys = eqx.error_if(ys, diverged(drift), DIVERGENCE_MESSAGE)
-        stats["energy_drift"] = drift
+    ys, result, checks = judge_run(
+        integrated, start, run.t0, saved_ts, ys, args, result,
+        fixed_steps=run.dt is not None and run.saveat is None, throw=run.throw,
+    )  # fmt: skip
     return Trajectory(
         ts=saved_ts,
         ys=ys,
         system=integrated,
         args=args,
-        run_stats=stats,
+        run_stats={**stats, **checks},
         result=result,
         solver_name=type(solver).__name__,
         dense_output=None
@@ -207,27 +225,49 @@ def simulate(
     )
 
 
-def _all_saved_states_finite(saved_ts: jax.Array, ys: Any) -> jax.Array:
-    """Whether every saved state is finite.
+class _Constant:
+    """A pytree of concrete values as a static (hashed) part of the compiled call.
 
-    diffrax fills the unused slots of `SaveAt(steps=True)` with t = inf and inf
-    states; those are not results and are skipped.
+    The scan path lays out its loops in Python from the save times (`_Run.saving`,
+    `_Run.save_grid`), so they must reach it concrete. A NumPy array would not:
+    inside a trace every `jnp` operation on it, a `SubSaveAt` conversion too,
+    returns a tracer. A concrete `jax.Array` passes through `jnp.asarray` as it is.
     """
-    used = jnp.isfinite(saved_ts)
 
-    def leaf_finite(x):
-        mask = used.reshape(used.shape + (1,) * (jnp.ndim(x) - used.ndim))
-        return jnp.all(jnp.isfinite(x) | ~mask)
+    def __init__(self, value: Any):
+        self.value = value
+        leaves, treedef = jax.tree_util.tree_flatten(value)
+        self._key = treedef, tuple(map(_leaf_key, leaves))
 
-    return jnp.all(jnp.stack([leaf_finite(x) for x in jax.tree_util.tree_leaves(ys)]))
+    def __hash__(self) -> int:
+        return hash(self._key)
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, _Constant) and self._key == other._key
 
 
-_NON_FINITE_MESSAGE = (
-    "The integration produced a non-finite state (inf/NaN). Likely causes: a "
-    "singular mass matrix (degenerate L, or a coordinate singularity such as "
-    "Euler-angle gimbal lock), a step too large for a stiff problem, or a "
-    "collision/singular potential. Pass throw=False to inspect the trajectory."
-)
+def _leaf_key(leaf: Any) -> Any:
+    if not eqx.is_array(leaf):
+        return leaf
+    array = np.asarray(leaf)
+    return array.shape, array.dtype.str, array.tobytes()
+
+
+def _save_times(ts: Any, dtype: Any) -> Any:
+    """`ts` in the run's dtype: a NumPy array when concrete (no device work before
+    the compiled call), a tracer as it is."""
+    if ts is None or isinstance(ts, Tracer):
+        return ts
+    return np.asarray(ts, dtype=dtype)
+
+
+def _for_compiled_call(run: _Run, scan: bool) -> _Run:
+    """`run` as `_compiled_run` takes it: the scan path lays out its loops in Python
+    from the save times, so they travel as static constants (`_Constant`)."""
+    if not scan:
+        return run
+    ts = None if run.ts is None else jax.device_put(run.ts)
+    return run._replace(ts=_Constant(ts), saveat=_Constant(run.saveat))
 
 
 class _Run(NamedTuple):

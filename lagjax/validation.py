@@ -16,6 +16,7 @@ are checked. Every refusal names the problem and what to do instead:
 | `y0` | not a pair; q and its partner of different structure or shape; NaN/inf; float16; complex or boolean | `(q0, qdot0)` / `(q0, p0)` of matching shapes, float32/64 |
 | `y0` of a `RigidBody` | quaternion not of shape (4,), zero; momentum not (3,) | a unit quaternion, e.g. `(1, 0, 0, 0)` |
 | `rtol`, `atol` | NaN, negative, or both zero | positive tolerances |
+| `y0` of a constrained `Lagrangian` | off the constraints (residuals named) | a start on the manifold |
 
 Integer entries in `y0` are accepted (documented) and converted to floats here:
 `(1, 0)` starts the same run as `(1.0, 0.0)`. Half precision (float16, bfloat16) is
@@ -40,7 +41,9 @@ import jax.numpy as jnp
 import numpy as np
 from jax.core import Tracer
 
+from .mechanics.constraints import refuse_start_off_constraints
 from .mechanics.lagrangian import Lagrangian
+from .precision import cast_floats
 from .rigid.body import RigidBody
 from .rigid.quaternion import check_nonzero_quaternion
 from .scenes.base import AbstractScene
@@ -293,6 +296,23 @@ def check_initial_state(system: AbstractSystem, y0: Any) -> Any:
         _check_partners(system, first, second)
     _check_finite(y0)
     return _floated(y0)
+
+
+def check_constrained_start(
+    system: AbstractSystem, y0: Any, t0: Any, args: Any, dtype: Any
+) -> None:
+    """A constrained Lagrangian's start must lie on its constraints.
+
+    Checked here, on concrete values in the run's `dtype`, because the compiled run
+    sees traced values and could only attach the error at run time, without the
+    residuals in the message. `system` and `args` are the resolved ones
+    (`AbstractSystem.resolve`).
+    """
+    if not isinstance(system, Lagrangian) or system.constraints is None:
+        return
+    q0, qdot0 = cast_floats(tuple(y0), dtype)
+    constraints = cast_floats(system.constraints, dtype)
+    refuse_start_off_constraints(constraints, q0, qdot0, t0, cast_floats(args, dtype))
 
 
 def _check_scene_state(scene: AbstractScene, y0: Any) -> None:
