@@ -97,6 +97,10 @@ _STRUCTURAL = frozenset(
     [
         "broadcast_in_dim",
         "concatenate",
+        "cummax",
+        "cummin",
+        "cumprod",
+        "cumsum",
         "dot_general",
         "reduce_max",
         "reduce_min",
@@ -111,6 +115,12 @@ _STRUCTURAL = frozenset(
         "transpose",
     ]
 )
+_CUMULATIVE = {
+    "cumsum": lax.add,
+    "cumprod": lax.mul,
+    "cummax": lax.max,
+    "cummin": lax.min,
+}
 _CALLS = frozenset({"pjit", "jit", "closed_call"})
 # Primitives without operands that produce a constant array (jnp.eye, jnp.arange).
 _CONSTANTS = frozenset({"iota"})
@@ -164,6 +174,27 @@ def _reduce(operand: np.ndarray, axes: Sequence[int], combine: Callable) -> np.n
         # plain indexing would hand _fold the bare element.
         out[index] = _fold(moved[(*index, ...)], combine)
     return out
+
+
+def _cumulative(
+    operand: np.ndarray, axis: int, reverse: bool, combine: Callable
+) -> np.ndarray:
+    """Running reduction along `axis` (jnp.cumsum & co.), one combine per element."""
+    moved = np.moveaxis(operand, axis, -1)
+    if moved.shape[-1] == 0:
+        return operand
+    if reverse:
+        moved = moved[..., ::-1]
+    out = np.empty(moved.shape, dtype=object)
+    for index in np.ndindex(*moved.shape[:-1]):
+        running = moved[(*index, 0)]
+        out[(*index, 0)] = running
+        for k in range(1, moved.shape[-1]):
+            running = combine(running, moved[(*index, k)])
+            out[(*index, k)] = running
+    if reverse:
+        out = out[..., ::-1]
+    return np.moveaxis(out, -1, axis)
 
 
 def _dot_general(
@@ -226,6 +257,10 @@ def _structural(eqn: Any, operands: list[np.ndarray]) -> Any:
         return np.split(operands[0], bounds, axis=params["axis"])
     if name == "dot_general":
         return _dot_general(operands[0], operands[1], params["dimension_numbers"])
+    if name in _CUMULATIVE:
+        return _cumulative(
+            operands[0], params["axis"], params["reverse"], _CUMULATIVE[name]
+        )
     combine = {"reduce_sum": lax.add, "reduce_max": lax.max, "reduce_min": lax.min}.get(
         name, lax.mul
     )
