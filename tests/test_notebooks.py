@@ -15,7 +15,10 @@ def test_there_are_notebooks():
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.name)
-def test_notebook_executes(path, tmp_path):
+def test_notebook_executes(path, tmp_path, monkeypatch):
+    # Notebooks with long training or sweeps read this and run a short version of
+    # the same cells; the kernel inherits the environment.
+    monkeypatch.setenv("LAGJAX_NOTEBOOK_QUICK", "1")
     notebook = nbformat.read(path, as_version=4)
     client = nbclient.NotebookClient(
         notebook,
