@@ -59,6 +59,7 @@ from .hermite import HermiteDenseOutput, needs_hermite
 from .precision import cast_floats, working_dtype
 from .scan_saving import ScanSaving, integrate_saving, scan_saving
 from .solvers.implicit import stage_failure_message
+from .static_values import Constant
 from .step_grid import grid_step
 from .stepping import (
     as_python_number,
@@ -189,7 +190,7 @@ def _compiled_run(system, y0, args, solver, run: _Run, scan: bool) -> Trajectory
         cast_floats(system, dtype),
         cast_floats(args, dtype),
     )
-    if isinstance(run.ts, _Constant):  # the scan path (`_for_compiled_call`)
+    if isinstance(run.ts, Constant):  # the scan path (`_for_compiled_call`)
         saveat: Any = run.saveat
         run = run._replace(ts=run.ts.value, saveat=saveat.value)
     elif run.ts is not None:
@@ -225,34 +226,6 @@ def _compiled_run(system, y0, args, solver, run: _Run, scan: bool) -> Trajectory
     )
 
 
-class _Constant:
-    """A pytree of concrete values as a static (hashed) part of the compiled call.
-
-    The scan path lays out its loops in Python from the save times (`_Run.saving`,
-    `_Run.save_grid`), so they must reach it concrete. A NumPy array would not:
-    inside a trace every `jnp` operation on it, a `SubSaveAt` conversion too,
-    returns a tracer. A concrete `jax.Array` passes through `jnp.asarray` as it is.
-    """
-
-    def __init__(self, value: Any):
-        self.value = value
-        leaves, treedef = jax.tree_util.tree_flatten(value)
-        self._key = treedef, tuple(map(_leaf_key, leaves))
-
-    def __hash__(self) -> int:
-        return hash(self._key)
-
-    def __eq__(self, other: object) -> bool:
-        return isinstance(other, _Constant) and self._key == other._key
-
-
-def _leaf_key(leaf: Any) -> Any:
-    if not eqx.is_array(leaf):
-        return leaf
-    array = np.asarray(leaf)
-    return array.shape, array.dtype.str, array.tobytes()
-
-
 def _save_times(ts: Any, dtype: Any) -> Any:
     """`ts` in the run's dtype: a NumPy array when concrete (no device work before
     the compiled call), a tracer as it is."""
@@ -263,11 +236,12 @@ def _save_times(ts: Any, dtype: Any) -> Any:
 
 def _for_compiled_call(run: _Run, scan: bool) -> _Run:
     """`run` as `_compiled_run` takes it: the scan path lays out its loops in Python
-    from the save times, so they travel as static constants (`_Constant`)."""
+    from the save times, so they travel as static constants
+    (`lagjax.static_values`)."""
     if not scan:
         return run
     ts = None if run.ts is None else jax.device_put(run.ts)
-    return run._replace(ts=_Constant(ts), saveat=_Constant(run.saveat))
+    return run._replace(ts=Constant(ts), saveat=Constant(run.saveat))
 
 
 class _Run(NamedTuple):
