@@ -74,9 +74,10 @@ def plot(
                 continue
             style = palette.style(route, method="Dopri8")
             label = route
-            if chain:
-                label, style = f"{route}, FPU chain", {**style, "linestyle": "none",
-                                                       "marker": "D"}  # fmt: skip
+            if chain:  # a hollow marker of the route's own shape, no line
+                label = f"{route}, FPU chain"
+                style = {**style, "linestyle": "none", "markersize": 9,
+                         "markerfacecolor": "none", "markeredgewidth": 1.5}  # fmt: skip
             ns = [r["n"] for r in rows]
             build.loglog(ns, [r["build_s"] for r in rows], label=label, **style)
             run.loglog(ns, [r["run_s"] for r in rows], label=label, **style)
