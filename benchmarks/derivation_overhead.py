@@ -13,7 +13,8 @@ over the link velocities, 2·10³ RK4 steps, single and vmapped over 64 states: 
 default `Lagrangian(L).acceleration` (scalar formulation up to 6 coordinates, dense
 beyond) against hand-written twins with the closed-form mass matrix
 M_ij = (n − max(i, j)) cos(θ_i − θ_j) solved by Cholesky (`cho_factor`/`cho_solve`)
-or by LU (`jnp.linalg.solve`); the ratio is to the faster twin.
+or by LU (`jnp.linalg.solve`); the ratio is to the faster twin, and a closing
+table lists it per size (single and batched) with the twin that was faster.
 
 First call (trace + compile + run, each in a fresh process, variants alternated):
 `simulate` with Tsit5 / Dopri8 on the derived double pendulum against
@@ -21,7 +22,9 @@ First call (trace + compile + run, each in a fresh process, variants alternated)
 the time goes, `diffeqsolve` on the derived acceleration (the derivation's share).
 
 Run: `python -m benchmarks.derivation_overhead [--steps N] [--batch B] [--repeats R]
-[--links 2 4 6 12 24 32] [--first-call-repeats R]` (`--links` / repeats 0 skip a part).
+[--links 2 4 6 12 24 32] [--first-call-repeats R] [--skip-double-pendulum]
+[--clock cpu]` (`--links` / repeats 0 skip a part; `--clock cpu` times the n-link
+rows in process CPU time, robust on a loaded machine).
 """
 
 from __future__ import annotations
@@ -42,6 +45,7 @@ import jax.scipy.linalg as jsl  # noqa: E402
 import numpy as np  # noqa: E402
 
 import lagjax as lj  # noqa: E402
+from benchmarks.kepler_saved import CLOCKS  # noqa: E402
 
 # The demo's L, written with indexing (`q[0]`, `q[1]`), and the textbook closed form
 # of its equations of motion (m = l = 1, g = G = 9.81).
@@ -123,7 +127,9 @@ def n_link_lu(q, qd):
     return jnp.linalg.solve(mass, rhs)
 
 
-def alternating_runs(functions: dict, inputs, repeats: int) -> dict:
+def alternating_runs(
+    functions: dict, inputs, repeats: int, clock=time.perf_counter
+) -> dict:
     """{name: (compile s, median run s)}, the variants run alternately."""
     compiled, compile_times = {}, {}
     for name, fn in functions.items():
@@ -134,13 +140,15 @@ def alternating_runs(functions: dict, inputs, repeats: int) -> dict:
     runs: dict[str, list[float]] = {name: [] for name in functions}
     for _ in range(repeats):
         for name, fn in compiled.items():
-            start = time.perf_counter()
+            start = clock()
             jax.block_until_ready(fn(*inputs))
-            runs[name].append(time.perf_counter() - start)
+            runs[name].append(clock() - start)
     return {name: (compile_times[name], statistics.median(runs[name])) for name in runs}
 
 
-def n_link_rows(links: list[int], steps: int, batch: int, repeats: int) -> None:
+def n_link_rows(
+    links: list[int], steps: int, batch: int, repeats: int, clock=time.perf_counter
+) -> None:
     print(f"\nn-link pendulum, {steps} RK4 steps, vmapped batch {batch}")
     print(f"{'n':>3s} {'right-hand side':22s} {'mode':8s} {'compile s':>9s} "
           f"{'us/step':>9s} {'ratio':>6s}")  # fmt: skip
@@ -149,20 +157,33 @@ def n_link_rows(links: list[int], steps: int, batch: int, repeats: int) -> None:
         "closed form, LU": n_link_lu,
         "lagjax, default": lj.Lagrangian(n_link_lagrangian).acceleration,
     }
+    table = []
     for n in links:
         q0, qd0 = jnp.linspace(0.3, 1.0, n), jnp.zeros(n)
         noise = 0.1 * jax.random.normal(jax.random.PRNGKey(n), (batch, n))
         batched_inputs = (q0 + noise, jnp.zeros((batch, n)))
+        row = [n]
         for mode, inputs in (("single", (q0, qd0)), ("batched", batched_inputs)):
             functions = {}
             for name, acceleration in candidates.items():
                 single = rk4_integrator(acceleration, steps, 1e-3)
                 functions[name] = single if mode == "single" else jax.vmap(single)
-            results = alternating_runs(functions, inputs, repeats)
-            best_twin = min(t for name, (_, t) in results.items() if "closed" in name)
+            results = alternating_runs(functions, inputs, repeats, clock)
+            twin, best = min(
+                ((name, t) for name, (_, t) in results.items() if "closed" in name),
+                key=lambda item: item[1],
+            )
             for name, (compile_time, run_time) in results.items():
                 print(f"{n:3d} {name:22s} {mode:8s} {compile_time:9.2f} "
-                      f"{1e6 * run_time / steps:9.2f} {run_time / best_twin:6.2f}")  # fmt: skip
+                      f"{1e6 * run_time / steps:9.2f} {run_time / best:6.2f}")  # fmt: skip
+            ratio = results["lagjax, default"][1] / best
+            row += [ratio, twin.split(", ")[1]]
+        table.append(row)
+    print(f"\nn-link ratios, lagjax default / faster closed-form twin (batch {batch})")
+    print(f"{'n':>3s} {'single':>7s} {'twin':9s} {'batched':>8s} {'twin':9s}")
+    for n, single_ratio, single_twin, batched_ratio, batched_twin in table:
+        print(f"{n:3d} {single_ratio:7.2f} {single_twin:9s} {batched_ratio:8.2f} "
+              f"{batched_twin:9s}")  # fmt: skip
 
 
 _FIRST_CALL = """
@@ -231,12 +252,22 @@ def main() -> None:
     parser.add_argument("--link-batch", type=int, default=64)
     parser.add_argument("--first-call-repeats", type=int, default=3)
     parser.add_argument("--skip-double-pendulum", action="store_true")
+    parser.add_argument(
+        "--clock",
+        choices=sorted(CLOCKS),
+        default="wall",
+        help="cpu: process CPU time, robust on a loaded machine (n-link rows)",
+    )
     options = parser.parse_args()
     if not options.skip_double_pendulum:
         double_pendulum_rows(options)
     if options.links:
         n_link_rows(
-            options.links, options.link_steps, options.link_batch, options.repeats
+            options.links,
+            options.link_steps,
+            options.link_batch,
+            options.repeats,
+            CLOCKS[options.clock],
         )
     if options.first_call_repeats:
         first_call_rows(options.first_call_repeats)
