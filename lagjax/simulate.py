@@ -240,7 +240,10 @@ def _for_compiled_call(run: _Run, scan: bool) -> _Run:
     (`lagjax.static_values`)."""
     if not scan:
         return run
-    ts = None if run.ts is None else jax.device_put(run.ts)
+    # Concrete even when simulate is traced (inside a user's jit, device_put is
+    # staged like any operation).
+    with jax.ensure_compile_time_eval():
+        ts = None if run.ts is None else jax.device_put(run.ts)
     return run._replace(ts=Constant(ts), saveat=Constant(run.saveat))
 
 

@@ -99,3 +99,7 @@ def test_scan_path_with_saves_reuses_its_compilation():
     assert compiled == []
     # Yoshida4 keeps H to O(h⁴) = 1e-8 times a constant of this eccentric orbit.
     np.testing.assert_allclose(energy, KEPLER(*start), rtol=1e-6)
+    # The same run inside a user's jit: the save times still reach the scans as
+    # values (a traced copy would send the run down diffeqsolve's loop).
+    traced = jax.jit(energies)(start)
+    np.testing.assert_allclose(traced, KEPLER(*start), rtol=1e-6)
