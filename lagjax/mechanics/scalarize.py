@@ -9,7 +9,9 @@ hand-written equations of motion (see `benchmarks/derivation_overhead.py`).
 How: the function is traced once to a jaxpr; the jaxpr is then evaluated with every
 array held as a NumPy object array of JAX scalars. Element-wise primitives act per
 element, structural ones (slice, reshape, broadcast, concatenate, transpose) only move
-scalars around, and contractions (dot_general, reductions) become sums of products.
+scalars around, contractions (dot_general, reductions) become sums of products, and
+cumulative reductions (`jnp.cumsum` & co., as in a chain's link positions) running
+sums.
 A primitive outside the supported set, or an intermediate array larger than
 `MAX_SCALARIZED_SIZE`, makes `scalarize` return None and the caller keeps the
 function as written — the result is the same either way, only the speed differs.
