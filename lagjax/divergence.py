@@ -102,8 +102,10 @@ DIVERGENCE_MESSAGE = (
 NON_FINITE_MESSAGE = (
     "The integration produced a non-finite state (inf/NaN). Likely causes: a "
     "singular mass matrix (degenerate L, or a coordinate singularity such as "
-    "Euler-angle gimbal lock), a step too large for a stiff problem, or a "
-    "collision/singular potential. Pass throw=False to inspect the trajectory."
+    "Euler-angle gimbal lock), redundant or dependent constraints (a "
+    "rank-deficient constraint Jacobian in RATTLE's G M^-1 G^T), a step too large "
+    "for a stiff problem, or a collision/singular potential. Pass throw=False to "
+    "inspect the trajectory."
 )
 
 
