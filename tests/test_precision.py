@@ -98,7 +98,8 @@ def test_every_scene_runs_in_float32(name):
     "solver",
     [
         diffrax.Tsit5(),
-        diffrax.Kvaerno5(),
+        # The slowest to compile (an adaptive implicit solver, twice): the slow run.
+        pytest.param(diffrax.Kvaerno5(), marks=pytest.mark.slow),
         lj.GaussLegendre(stages=3),
         lj.VariationalMidpoint(),
     ],
