@@ -152,7 +152,10 @@ def finite_difference_jacobian(function, z, eps=1e-6):
 
 NEWTON = optx.Newton(rtol=1e-14, atol=1e-14)
 SYMPLECTIC_SOLVERS = [GaussLegendre(stages=s) for s in (1, 2, 3)]
-SYMPLECTIC_SOLVERS += [GaussLegendre(stages=3, root_finder=NEWTON)]
+# Newton's implicitly differentiated stage solve compiles the slowest: the slow run.
+SYMPLECTIC_SOLVERS += [
+    pytest.param(GaussLegendre(stages=3, root_finder=NEWTON), marks=pytest.mark.slow)
+]
 
 
 @pytest.mark.parametrize(
