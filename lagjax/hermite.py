@@ -42,6 +42,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 from diffrax._misc import linear_rescale
+from diffrax._term import WrapTerm
 
 # The quintic Hermite polynomial p(s) = Σ c_j s^j through y0, y1, k0, k1, m0, m1
 # (k = h y', m = h² y''): rows are the powers s⁵ … s⁰ (numpy.polyval order), columns
@@ -162,8 +163,16 @@ class HermiteDenseOutput(diffrax.AbstractWrappedSolver):
         """(ẏ, ÿ) at (t, y); ÿ = ∂f/∂t + f'(y)·f by one Jacobian–vector product
         (empty for the cubic)."""
 
+        # A backward run (t1 < t0) reaches the solver in reversed time τ = −t, with
+        # diffrax's direction in the terms' `contr` and not in `vf`: the slopes the
+        # Hermite polynomial needs are dy/dτ = direction · f.
+        direction = _time_direction(terms)
+
         def field(time, state):
-            return self.solver.func(terms, time, state, args)
+            rate = self.solver.func(terms, time, state, args)
+            return jax.tree_util.tree_map(
+                lambda x: (direction * x).astype(jnp.result_type(x)), rate
+            )
 
         if not self.quintic:
             return field(t, y), ()
@@ -185,6 +194,20 @@ class HermiteDenseOutput(diffrax.AbstractWrappedSolver):
     def inner_state(state):
         """The wrapped solver's state within this solver's."""
         return state[0]
+
+
+def _time_direction(terms: Any) -> Any:
+    """+1, or −1 when diffrax integrates t1 < t0 in reversed time: the product of
+    the `direction`s of the time-direction wrappers around the first term (diffrax
+    wraps every term alike; `WrapTerm` is not public API, see `lagjax.terms`)."""
+    term = jax.tree_util.tree_leaves(
+        terms, is_leaf=lambda x: isinstance(x, diffrax.AbstractTerm)
+    )[0]
+    direction = 1
+    while isinstance(term, WrapTerm):
+        direction = direction * term.direction
+        term = term.term
+    return direction
 
 
 def needs_hermite(solver: diffrax.AbstractSolver) -> bool:
