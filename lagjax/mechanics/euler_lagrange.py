@@ -141,13 +141,7 @@ def euler_lagrange_acceleration(
 
     **Returns:** q̈ with the structure of `q`.
     """
-    q_flat, unravel = ravel_pytree(q)
-    v_flat, _ = ravel_pytree(qdot)
-    t = jnp.asarray(t, dtype=q_flat.dtype)
-
-    def lag_flat(qf, vf, tt):
-        return lagrangian(unravel(qf), unravel(vf), tt, args)
-
+    lag_flat, q_flat, v_flat, t, unravel = flat_lagrangian(lagrangian, q, qdot, t, args)
     force = None if generalized_force is None else ravel_pytree(generalized_force)[0]
     if q_flat.shape[0] <= SCALAR_COORDINATE_LIMIT:
         mass, rhs = _scalar_system(lag_flat, q_flat, v_flat, t)
@@ -159,8 +153,27 @@ def euler_lagrange_acceleration(
         if force is not None:
             rhs_array = rhs_array + force
         qddot, singular = solve_dense(mass, rhs_array)
+    return unravel(apply_singular_check(qddot, singular, check))
+
+
+def flat_lagrangian(lagrangian: Callable, q: Any, qdot: Any, t: Any, args: Any):
+    """`(L_flat, q_flat, v_flat, t, unravel)`: L of flat coordinate and velocity
+    vectors, the flattened point, t in their dtype, and the map back to q's tree."""
+    q_flat, unravel = ravel_pytree(q)
+    v_flat, _ = ravel_pytree(qdot)
+    t = jnp.asarray(t, dtype=q_flat.dtype)
+
+    def lag_flat(qf, vf, tt):
+        return lagrangian(unravel(qf), unravel(vf), tt, args)
+
+    return lag_flat, q_flat, v_flat, t, unravel
+
+
+def apply_singular_check(qddot: jax.Array, singular: jax.Array, check: Any):
+    """`check`'s verdict on a singular mass matrix: NaN ("nan"), a run-time error
+    (True), or nothing (False)."""
     if check == "nan":
-        qddot = jnp.where(singular, jnp.nan, qddot)
-    elif check:
-        qddot = raise_if_singular(qddot, singular, "The mass matrix ∂²L/∂q̇∂q̇")
-    return unravel(qddot)
+        return jnp.where(singular, jnp.nan, qddot)
+    if check:
+        return raise_if_singular(qddot, singular, "The mass matrix ∂²L/∂q̇∂q̇")
+    return qddot

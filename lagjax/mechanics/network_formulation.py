@@ -43,7 +43,8 @@ import jax
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
-from .linalg import raise_if_singular, solve_dense
+from .euler_lagrange import apply_singular_check, flat_lagrangian
+from .linalg import solve_dense
 
 FlatLagrangian = Callable[[jax.Array, jax.Array, jax.Array], jax.Array]
 
@@ -94,21 +95,11 @@ def network_euler_lagrange_acceleration(
     (q and q̇ any matching pytrees, `generalized_force` None or like q); only the
     derivation differs.
     """
-    q_flat, unravel = ravel_pytree(q)
-    v_flat, _ = ravel_pytree(qdot)
-    t = jnp.asarray(t, dtype=q_flat.dtype)
-
-    def lag_flat(qf, vf, tt):
-        return lagrangian(unravel(qf), unravel(vf), tt, args)
-
+    lag_flat, q_flat, v_flat, t, unravel = flat_lagrangian(lagrangian, q, qdot, t, args)
     mass, rhs = hessian_vector_system(lag_flat, q_flat, v_flat, t)
     if generalized_force is not None:
         rhs = rhs + ravel_pytree(generalized_force)[0]
     # LU with partial pivoting: the network's matrix products dominate the cost, and
     # pivoting solves any nonsingular M (a learned one need not be definite).
     qddot, singular = solve_dense(mass, rhs)
-    if check == "nan":
-        qddot = jnp.where(singular, jnp.nan, qddot)
-    elif check:
-        qddot = raise_if_singular(qddot, singular, "The mass matrix ∂²L/∂q̇∂q̇")
-    return unravel(qddot)
+    return unravel(apply_singular_check(qddot, singular, check))
