@@ -70,6 +70,7 @@ from .solvers.projection import ConstraintProjection as ConstraintProjection
 from .solvers.rattle import Rattle as Rattle
 from .solvers.splitting import BlanesMoan4 as BlanesMoan4
 from .solvers.splitting import BlanesMoan6 as BlanesMoan6
+from .solvers.splitting import BlanesMoanNystrom6 as BlanesMoanNystrom6
 from .solvers.splitting import KahanLi8 as KahanLi8
 from .solvers.splitting import SofSpa10 as SofSpa10
 from .solvers.splitting import StormerVerlet as StormerVerlet

@@ -46,6 +46,8 @@ from .solvers.lie_poisson import RigidBodyVerlet, RigidBodyYoshida4  # noqa: E40
 from .solvers.rattle import Rattle  # noqa: E402
 from .solvers.splitting import (  # noqa: E402
     BlanesMoan4,
+    BlanesMoan6,
+    BlanesMoanNystrom6,
     KahanLi8,
     SofSpa10,
     StormerVerlet,
@@ -62,6 +64,8 @@ SOLVERS: dict[str, Callable[[], diffrax.AbstractSolver]] = {
     "KahanLi8": KahanLi8,
     "SofSpa10": SofSpa10,
     "BlanesMoan4": BlanesMoan4,
+    "BlanesMoan6": BlanesMoan6,
+    "BlanesMoanNystrom6": BlanesMoanNystrom6,
     "ImplicitMidpoint": ImplicitMidpoint,
     "GaussLegendre1": lambda: GaussLegendre(stages=1),
     "GaussLegendre2": lambda: GaussLegendre(stages=2),

@@ -65,6 +65,7 @@ class AbstractHamiltonian(AbstractSystem):
         splitting method for a separable H."""
         import diffrax
 
+        from ..solvers.splitting import AbstractSplittingSolver
         from ..terms import (
             HamiltonVectorField,
             LagrangianTerm,
@@ -84,6 +85,16 @@ class AbstractHamiltonian(AbstractSystem):
                 f"{type(solver).__name__} is a splitting method and needs a "
                 "SeparableHamiltonian(T, V); for a general H use GaussLegendre, "
                 "ImplicitMidpoint or an adaptive diffrax solver."
+            )
+        nystrom = isinstance(solver, AbstractSplittingSolver) and (
+            solver.needs_quadratic_kinetic
+        )
+        if nystrom and not self.quadratic_in_momentum:
+            raise ValueError(
+                f"{type(solver).__name__} is a Runge–Kutta–Nyström method: it keeps "
+                "its order only for a kinetic energy quadratic in p, and this "
+                "SeparableHamiltonian has quadratic_in_momentum=False. Use "
+                "BlanesMoan6 or another splitting method."
             )
         terms = (
             diffrax.ODETerm(SeparableDrift(self)),

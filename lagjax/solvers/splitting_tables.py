@@ -18,7 +18,7 @@ References:
 
 - Yoshida, Phys. Lett. A 150, 262 (1990).
 - Kahan & Li, Math. Comp. 66, 1089 (1997).
-- Blanes & Moan, J. Comput. Appl. Math. 142, 313 (2002), Table 2.
+- Blanes & Moan, J. Comput. Appl. Math. 142, 313 (2002), Tables 2 and 3.
 - Sofroniou & Spaletta, Optim. Methods Softw. 20, 597 (2005).
 - Hairer, Lubich & Wanner, *Geometric Numerical Integration*, 2nd ed., Springer
   (2006), §V.3.2 (the composition tables to 26 digits).
@@ -117,3 +117,29 @@ _BM6_A = (
 _BM6_B = (0.148816447901042, -0.132385865767784, 0.067307604692185, 0.432666402578175)
 BLANES_MOAN6_KICKS = palindrome(_BM6_A, 1 - 2 * sum(_BM6_A))
 BLANES_MOAN6_DRIFTS = (*_BM6_B, 0.5 - sum(_BM6_B), 0.5 - sum(_BM6_B), *reversed(_BM6_B))
+
+# Blanes & Moan (2002), Table 3, RKN method SRKN_11^b (order 6 when T is quadratic
+# in p, so that [V, [V, [V, T]]] = 0): 12 kick coefficients b_1..b_6, b_6..b_1 with
+# b6 = 1/2 − (b1 + … + b5), 11 drift coefficients a_1..a_6..a_1 with
+# a6 = 1 − 2(a1 + … + a5); 11 force evaluations per step with first-same-as-last.
+_BMN6_KICK = (
+    0.0414649985182624,
+    0.198128671918067,
+    -0.0400061921041533,
+    0.0752539843015807,
+    -0.0115113874206879,
+)
+_BMN6_DRIFT = (
+    0.123229775946271,
+    0.290553797799558,
+    -0.127049212625417,
+    -0.246331761062075,
+    0.357208872795928,
+)
+BLANES_MOAN_NYSTROM6_KICKS = (
+    *_BMN6_KICK,
+    0.5 - sum(_BMN6_KICK),
+    0.5 - sum(_BMN6_KICK),
+    *reversed(_BMN6_KICK),
+)
+BLANES_MOAN_NYSTROM6_DRIFTS = palindrome(_BMN6_DRIFT, 1 - 2 * sum(_BMN6_DRIFT))
