@@ -3,6 +3,9 @@
 #   bash tasks.sh demo    set up (first time) and run the main job: the double-pendulum
 #                         derivation demo, then `lagjax run foucault-pendulum`
 #   bash tasks.sh test    set up (first time) and run the test suite
+#   bash tasks.sh integration
+#                         the integration checks: every notebook and the benchmark
+#                         scripts' quick modes, each in a fresh process (CI's second step)
 #   bash tasks.sh bench   set up with the benchmark extras and run the benchmarks
 # Set-up creates ./.venv with the package installed in editable mode; it is
 # re-run whenever pyproject.toml is newer than the environment's stamp.
@@ -34,6 +37,9 @@ case "$cmd" in
     # runs in one process. Whole files per worker: module fixtures (benchmark runs) and
     # a file's jitted functions are built once, not once on each worker.
     test) setup test; exec "$VENV/bin/python" -m pytest -n "${LAGJAX_TEST_WORKERS:-2}" --dist loadfile "$@" ;;
+    integration)
+        setup test
+        exec "$VENV/bin/python" -m pytest -n "${LAGJAX_TEST_WORKERS:-2}" --dist loadfile -m integration "$@" ;;
     bench) setup "test,bench"; exec "$VENV/bin/python" -m benchmarks.derivation_overhead "$@" ;;
-    *) echo "usage: bash tasks.sh {demo|test|bench} [args...]" >&2; exit 2 ;;
+    *) echo "usage: bash tasks.sh {demo|test|integration|bench} [args...]" >&2; exit 2 ;;
 esac

@@ -21,6 +21,9 @@ import pytest
 
 from lagjax import diagnostics
 
+# Fresh processes, whole scripts: CI's second step (`bash tasks.sh integration`).
+pytestmark = pytest.mark.integration
+
 ROOT = Path(__file__).resolve().parent.parent
 NAMES = ("rigid_long_horizon.csv", "rigid_long_horizon.json")
 NAMES += ("rigid_long_horizon.md", "rigid_long_horizon.png")

@@ -25,6 +25,9 @@ import pytest
 
 from lagjax import diagnostics
 
+# Fresh processes, whole scripts: CI's second step (`bash tasks.sh integration`).
+pytestmark = pytest.mark.integration
+
 ROOT = Path(__file__).resolve().parent.parent
 SCRIPTS = ("work_precision", "stability")  # modules of the benchmarks package
 

@@ -7,6 +7,9 @@ import pytest
 nbformat = pytest.importorskip("nbformat")
 nbclient = pytest.importorskip("nbclient")
 
+# Fresh processes, whole scripts: CI's second step (`bash tasks.sh integration`).
+pytestmark = pytest.mark.integration
+
 NOTEBOOKS = sorted((Path(__file__).parent.parent / "notebooks").glob("*.ipynb"))
 
 
