@@ -64,6 +64,7 @@ def measure(options, t1, ts, repeats, clock=time.perf_counter):
 
 # (name, solver, where its search starts); every start is above 1e-10 here.
 SPLITTINGS = (
+    ("BlanesMoanNystrom6", lj.BlanesMoanNystrom6(), 40),
     ("BlanesMoan6", lj.BlanesMoan6(), 80),
     ("KahanLi8", lj.KahanLi8(), 62),
     ("SofSpa10", lj.SofSpa10(), 40),
