@@ -35,7 +35,12 @@ import jax
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
-from .linalg import UNROLLED_SOLVE_LIMIT, raise_if_singular, solve_dense, solve_unrolled
+from .linalg import (
+    UNROLLED_SOLVE_LIMIT,
+    raise_if_singular,
+    solve_symmetric,
+    solve_unrolled,
+)
 from .scalarize import scalar_argument_function
 
 # Up to this many coordinates the scalar formulation is used; its trace grows as n²
@@ -103,7 +108,7 @@ def _solve_scalar(mass, rhs, poison: bool) -> tuple[jax.Array, jax.Array]:
         x, singular = solve_unrolled(mass, rhs, poison=poison)
         return jnp.stack(x), singular
     full = [[mass[min(i, j)][max(i, j)] for j in range(n)] for i in range(n)]
-    return solve_dense(jnp.stack([jnp.stack(row) for row in full]), jnp.stack(rhs))
+    return solve_symmetric(jnp.stack([jnp.stack(row) for row in full]), jnp.stack(rhs))
 
 
 # Compiled so that eager calls do not dispatch the scalar derivation op by op; under
@@ -152,7 +157,7 @@ def euler_lagrange_acceleration(
         mass, rhs_array = _dense_system(lag_flat, q_flat, v_flat, t)
         if force is not None:
             rhs_array = rhs_array + force
-        qddot, singular = solve_dense(mass, rhs_array)
+        qddot, singular = solve_symmetric(mass, rhs_array)
     return unravel(apply_singular_check(qddot, singular, check))
 
 

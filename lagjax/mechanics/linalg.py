@@ -1,24 +1,31 @@
 """Small linear solves with a singularity check, for mass matrices and Hessians.
 
 Mechanics solves M x = b where M = ∂²L/∂q̇∂q̇ (or ∂²H/∂p∂p) is small, symmetric and,
-for physical systems, positive definite. Two forms:
+for physical systems, positive definite. Three forms:
 
 - `solve_unrolled` works on Python lists of scalars for n ≤ 3 (closed-form inverse by
   cofactors). On CPU this keeps the whole integration step in one fused XLA kernel,
   which a batched `jnp.linalg.solve` on a 2×2 matrix does not (see
   `benchmarks/derivation_overhead.py`).
 - `solve_dense` works on arrays of any size (LU with partial pivoting).
+- `solve_symmetric` works on arrays of any size for a symmetric M that is usually
+  positive definite: Cholesky (half the work of LU, and what a hand-written solver
+  of a physical M uses), with LU as the fallback for the rare indefinite or
+  ill-conditioned M — decided per batch under `vmap` (see its docstring).
 
-Both return a flag that is true when M is numerically singular; callers turn it into
+All return a flag that is true when M is numerically singular; callers turn it into
 a run-time error with `raise_if_singular` instead of passing on inf/NaN.
 """
 
 from __future__ import annotations
 
+from typing import Any, NamedTuple
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
+import numpy as np
 
 UNROLLED_SOLVE_LIMIT = 3
 
@@ -83,17 +90,118 @@ def solve_unrolled(
     return x, singular
 
 
-def solve_dense(m: jax.Array, rhs: jax.Array) -> tuple[jax.Array, jax.Array]:
-    """Solve m x = rhs by LU with partial pivoting. Returns `(x, singular)`."""
+def _lu_verdict(m: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """LU factors of m and its singular flag (smallest pivot against the largest)."""
     n = m.shape[-1]
     lu, pivots = jsl.lu_factor(m)
-    x = jsl.lu_solve((lu, pivots), rhs)
     pivot_sizes = jnp.abs(jnp.diagonal(lu))
     largest = jnp.max(pivot_sizes)
     singular = (largest == 0) | (
         jnp.min(pivot_sizes) <= _singular_threshold(n, m.dtype) * largest
     )
-    return x, singular
+    return lu, pivots, singular
+
+
+def solve_dense(m: jax.Array, rhs: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """Solve m x = rhs by LU with partial pivoting. Returns `(x, singular)`."""
+    lu, pivots, singular = _lu_verdict(m)
+    return jsl.lu_solve((lu, pivots), rhs), singular
+
+
+@jax.custom_batching.custom_vmap
+def _any_in_batch(flag: jax.Array) -> jax.Array:
+    """`flag` itself; under `vmap`, whether it is true for any batch member (one
+    unbatched boolean), so that a `lax.cond` on it stays a branch, not a select."""
+    return flag
+
+
+@_any_in_batch.def_vmap
+def _any_in_batch_rule(axis_size, in_batched, flag):
+    del axis_size
+    return (jnp.any(flag) if in_batched[0] else flag), False
+
+
+class _SymmetricFactors(NamedTuple):
+    fallback: jax.Array  # LU was formed (for some member, under vmap)
+    sound: jax.Array  # this member's Cholesky factor is used
+    cholesky: jax.Array  # the identity where not sound, so never NaN
+    lu: jax.Array  # zeros when LU was not formed
+    pivots: jax.Array
+    singular: jax.Array
+
+
+def _factor_symmetric(m: jax.Array) -> _SymmetricFactors:
+    """Cholesky factor, whether it is sound, and LU factors only when needed."""
+    n = m.shape[-1]
+    # Reads the lower triangle only; a failed factorization comes back as NaN.
+    cholesky = jax.lax.linalg.cholesky(m, symmetrize_input=False)
+    squared_pivots = jnp.diagonal(cholesky) ** 2  # the pivots of LDLᵀ
+    # False for NaN, zero or relatively tiny pivots: then LU solves and judges.
+    threshold = _singular_threshold(n, m.dtype)
+    sound = jnp.min(squared_pivots) > threshold * jnp.max(squared_pivots)
+
+    def with_lu():
+        lu, pivots, singular = _lu_verdict(m)
+        # A member whose Cholesky failed must not carry NaN into the (discarded)
+        # Cholesky solve: 0 × NaN would reach the gradient.
+        safe = jnp.where(sound, cholesky, jnp.eye(n, dtype=m.dtype))
+        return safe, lu, pivots, ~sound & singular
+
+    def without_lu():
+        pivots = jnp.zeros(m.shape[:-1], dtype=np.int32)
+        return cholesky, jnp.zeros_like(m), pivots, jnp.zeros((), dtype=bool)
+
+    fallback = _any_in_batch(~sound)
+    return _SymmetricFactors(
+        fallback, sound, *jax.lax.cond(fallback, with_lu, without_lu)
+    )
+
+
+def _solve_factored(factors: _SymmetricFactors, rhs: jax.Array) -> jax.Array:
+    by_cholesky = jsl.cho_solve((factors.cholesky, True), rhs)
+
+    def with_lu():
+        by_lu = jsl.lu_solve((factors.lu, factors.pivots), rhs)
+        return jnp.where(factors.sound, by_cholesky, by_lu)
+
+    return jax.lax.cond(factors.fallback, with_lu, lambda: by_cholesky)
+
+
+@jax.custom_jvp
+def solve_symmetric(m: jax.Array, rhs: jax.Array) -> tuple[jax.Array, jax.Array]:
+    r"""Solve m x = rhs for a symmetric m, by Cholesky when m is positive definite.
+
+    Only the lower triangle of m is read by Cholesky. Returns `(x, singular)`.
+    When the Cholesky factor exists and no squared diagonal entry of it (the
+    pivots of $LDL^T$) is below `solve_dense`'s relative threshold, m counts as
+    nonsingular and LU is never formed; otherwise (m indefinite, singular or
+    nearly so) LU with partial pivoting solves and judges, as `solve_dense` does.
+    An indefinite but nonsingular m is therefore solved exactly too.
+
+    The fallback is a `lax.cond`. Under `vmap` a batched predicate would turn it
+    into a select that runs both factorizations for every member; here the
+    predicate is reduced over the batch first (`jax.custom_batching.custom_vmap`),
+    so LU runs only when some member needs it, and then only those members take
+    its answer.
+
+    Derivatives reuse the factors: $dx = m^{-1}(d\,\mathrm{rhs} - dm\,x)$ (a
+    custom JVP, linear in the tangents, so reverse mode transposes it; JAX's own
+    Cholesky JVP would cost two triangular solves with a matrix, and propagate
+    the NaN of a failed factorization).
+    """
+    factors = _factor_symmetric(m)
+    return _solve_factored(factors, rhs), factors.singular
+
+
+@solve_symmetric.defjvp
+def _solve_symmetric_jvp(primals, tangents) -> tuple[Any, Any]:
+    m, rhs = primals
+    dm, drhs = tangents
+    factors = _factor_symmetric(m)
+    x = _solve_factored(factors, rhs)
+    dx = _solve_factored(factors, drhs - dm @ x)
+    no_tangent = np.zeros(factors.singular.shape, dtype=jax.dtypes.float0)
+    return (x, factors.singular), (dx, no_tangent)
 
 
 def singular_message_for(what: str) -> str:
