@@ -56,6 +56,7 @@ from .fixed_step import (
 )
 from .flat_state import flattened
 from .hermite import HermiteDenseOutput, needs_hermite
+from .initial_state_checks import check_constrained_start
 from .precision import cast_floats, working_dtype
 from .scan_saving import ScanSaving, integrate_saving, scan_saving
 from .solvers.implicit import stage_failure_message
@@ -71,7 +72,7 @@ from .stepping import (
 )
 from .system import AbstractSystem
 from .trajectory import Trajectory
-from .validation import check_constrained_start, check_simulate_inputs
+from .validation import check_simulate_inputs
 
 System = AbstractSystem
 
