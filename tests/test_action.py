@@ -82,30 +82,36 @@ def smooth_path_action():
     return action_of_path(oscillator, smooth_path, 0.0, T1, intervals=256, nodes=5)
 
 
+@functools.partial(jax.jit, static_argnums=0)
+def smooth_path_sampled_action(intervals, warp):
+    """The action from n + 1 samples of `smooth_path`; one compilation per n serves
+    both warps (a traced argument)."""
+    u = jnp.linspace(0.0, 1.0, intervals + 1)
+    ts = T1 * (u + warp * jnp.sin(jnp.pi * u) / jnp.pi)  # monotone for warp < 1
+    qdot = jax.vmap(jax.grad(smooth_path))(ts)
+    return action(oscillator, samples(ts, smooth_path(ts), qdot))
+
+
 @pytest.mark.parametrize("warp", [0.0, 0.3], ids=["uniform", "non-uniform"])
 def test_order_four_on_any_smooth_path(warp):
-    path, reference = smooth_path, smooth_path_action()
-    errors = []
-    for n in INTERVALS:
-        u = jnp.linspace(0.0, 1.0, n + 1)
-        ts = T1 * (u + warp * jnp.sin(jnp.pi * u) / jnp.pi)  # monotone for warp < 1
-        qdot = jax.vmap(jax.grad(path))(ts)
-        errors.append(
-            abs(float(action(oscillator, samples(ts, path(ts), qdot)) - reference))
-        )
+    reference = smooth_path_action()
+    errors = [
+        abs(float(smooth_path_sampled_action(n, warp) - reference)) for n in INTERVALS
+    ]
     assert np.all(np.abs(slopes(errors, INTERVALS) - 4.0) < 0.15), errors
 
 
 @pytest.mark.parametrize("nodes, order", [(2, 4.0), (3, 6.0)])
 def test_order_on_a_true_path(nodes, order):
     """On a true path the interpolation error enters at second order only."""
-    errors = []
-    for n in INTERVALS:
-        ts = jnp.linspace(0.0, T1, n + 1)
+
+    @functools.partial(jax.jit, static_argnums=0)
+    def error(intervals):  # the samples and their action in one compilation
+        ts = jnp.linspace(0.0, T1, intervals + 1)
         traj = samples(ts, exact_q(ts), exact_qdot(ts))
-        errors.append(
-            abs(float(action(oscillator, traj, nodes=nodes) - exact_action(0, T1)))
-        )
+        return jnp.abs(action(oscillator, traj, nodes=nodes) - exact_action(0, T1))
+
+    errors = [float(error(n)) for n in INTERVALS]
     assert np.all(np.abs(slopes(errors, INTERVALS) - order) < 0.15), errors
     assert errors[-1] < 10 ** (-order - 3.5)
 
@@ -142,15 +148,19 @@ def test_jit_and_gradient_follow_hamilton():
 def test_batched_and_padded_trajectories():
     ts = jnp.linspace(0.0, T1, 129)
     speeds = jnp.array([-0.5, 0.0, 1.2, exact_qdot(0.0)])
-    batch = jax.vmap(lambda v: closed_form_samples(v, ts))(speeds)
-    batched = action(oscillator, batch)
-    one_by_one = jnp.stack(
-        [action(oscillator, closed_form_samples(v, ts)) for v in speeds]
-    )
-    assert batched.shape == (4,) and principal_function(oscillator, batch).shape == (
-        4,
-        129,
-    )
+
+    @jax.jit
+    def batched_and_looped(speeds):  # one compilation for both ways
+        batch = jax.vmap(lambda v: closed_form_samples(v, ts))(speeds)
+        one_by_one = [action(oscillator, closed_form_samples(v, ts)) for v in speeds]
+        return (
+            action(oscillator, batch),
+            jnp.stack(one_by_one),
+            principal_function(oscillator, batch),
+        )
+
+    batched, one_by_one, principal = batched_and_looped(speeds)
+    assert batched.shape == (4,) and principal.shape == (4, 129)
     assert relative_close(batched, one_by_one, 1e-14)
     assert relative_close(batched[-1], exact_action(0, T1), 1e-12)
     # Backwards in time the action changes sign.
@@ -164,7 +174,7 @@ def test_batched_and_padded_trajectories():
     of_positions = lambda q: action(
         oscillator_h, samples(padded_ts, q, momenta, system=oscillator_h)
     )
-    value, gradient = jax.value_and_grad(of_positions)(
+    value, gradient = jax.jit(jax.value_and_grad(of_positions))(
         jnp.concatenate([exact_q(ts), pad])
     )
     assert relative_close(value, exact_action(0, T1), 1e-12)
@@ -252,20 +262,25 @@ def test_hamiltons_principle(case):
 def test_principal_function_is_w_minus_alpha_t():
     """S(t) − S(0) = W(q(t), E) − W(q₀, E) − E t along the oscillator (eq. 6.73)."""
     scene = HarmonicOscillator()
-    omega = scene.frequency()
-    energy = scene.system()(*scene.initial_state(), 0.0, scene)
-    ts = jnp.linspace(0.0, 3.0, 301)
-    q, p = scene.exact_solution(ts)
-    run = samples(ts, q, p, system=scene.system())
-    run = lj.Trajectory(**{**vars(run), "args": scene})
-    # W = ∫p dq = J(θ + ½ sin 2θ), J = E/ω, θ the angle unwrapped (q ∝ sin θ).
-    theta = jnp.unwrap(scene.angle(q, p))
-    characteristic = energy / omega * (theta + 0.5 * jnp.sin(2 * theta))
-    expected = characteristic - characteristic[0] - energy * ts
-    measured = principal_function(scene, run)
+
+    @jax.jit
+    def measured_and_expected():  # one compilation, not dozens of op-by-op ones
+        omega = scene.frequency()
+        energy = scene.system()(*scene.initial_state(), 0.0, scene)
+        ts = jnp.linspace(0.0, 3.0, 301)
+        q, p = scene.exact_solution(ts)
+        run = samples(ts, q, p, system=scene.system())
+        run = lj.Trajectory(**{**vars(run), "args": scene})
+        # W = ∫p dq = J(θ + ½ sin 2θ), J = E/ω, θ the angle unwrapped (q ∝ sin θ).
+        theta = jnp.unwrap(scene.angle(q, p))
+        characteristic = energy / omega * (theta + 0.5 * jnp.sin(2 * theta))
+        expected = characteristic - characteristic[0] - energy * ts
+        return ts, principal_function(scene, run), action(scene, run), expected
+
+    ts, measured, total, expected = measured_and_expected()
     assert measured.shape == ts.shape and float(measured[0]) == 0.0
     assert relative_close(measured, expected, 1e-11)
-    assert relative_close(action(scene, run), expected[-1], 1e-11)
+    assert relative_close(total, expected[-1], 1e-11)
 
 
 def test_action_between_oscillator_closed_form_and_momenta():
@@ -302,8 +317,9 @@ def test_hamilton_jacobi_equation_for_a_pendulum():
         return action(pendulum, path), (path.q[-1], path.p[0], path.p[-1])
 
     q0, q1, duration = 0.2, 1.1, 0.6
-    gradient, (reached, p0, p1) = jax.jacfwd(
-        principal, argnums=(0, 1, 2), has_aux=True
+    # Jitted: one compilation instead of dozens of op-by-op dispatches.
+    gradient, (reached, p0, p1) = jax.jit(
+        jax.jacfwd(principal, argnums=(0, 1, 2), has_aux=True)
     )(q0, q1, duration)
     assert relative_close(reached, q1, 1e-12)
     assert relative_close(gradient[1], p1, 1e-10)
