@@ -7,6 +7,7 @@ and Brouwer's law for round-off with compensated summation.
 """
 
 import diffrax
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -118,19 +119,29 @@ def pendulum_final_states(solver, step_counts):
     return final_state(PENDULUM_T / jnp.asarray(step_counts, dtype=float))
 
 
+def order_step_counts(solver):
+    """Four step counts, h from the solver's coarsest asymptotic step down by 1.2⁻ᵏ."""
+    coarsest = COARSEST_STEP[type(solver)]
+    return np.round(PENDULUM_T / (coarsest * 1.2 ** -np.arange(4)))
+
+
 @pytest.fixture(scope="module")
-def pendulum_reference():
-    """SofSpa10 with h = 0.05: truncation error far below round-off."""
-    q, p = pendulum_final_states(SofSpa10(), [2000])
-    return q[0], p[0]
+def sofspa10_pendulum():
+    """SofSpa10's final states at h = 0.05 (the reference: truncation error far below
+    round-off) and at its own four order-test steps, from one compiled solve."""
+    step_counts = [2000, *order_step_counts(SofSpa10())]
+    q, p = pendulum_final_states(SofSpa10(), step_counts)
+    return (q[0], p[0]), (q[1:], p[1:])
 
 
 @pytest.mark.parametrize("solver", SOLVERS, ids=SOLVER_IDS)
-def test_convergence_order_on_driven_pendulum(solver, pendulum_reference):
-    coarsest = COARSEST_STEP[type(solver)]
-    step_counts = np.round(PENDULUM_T / (coarsest * 1.2 ** -np.arange(4)))
-    q, p = pendulum_final_states(solver, step_counts)
-    q_ref, p_ref = pendulum_reference
+def test_convergence_order_on_driven_pendulum(solver, sofspa10_pendulum):
+    step_counts = order_step_counts(solver)
+    (q_ref, p_ref), sofspa10_states = sofspa10_pendulum
+    if isinstance(solver, SofSpa10):
+        q, p = sofspa10_states  # already solved with the reference
+    else:
+        q, p = pendulum_final_states(solver, step_counts)
     errors = np.maximum(np.abs(q - q_ref), np.abs(p - p_ref))
     assert np.all(errors > 1e-13), "step range reaches round-off; slope meaningless"
     slope = np.polyfit(np.log(PENDULUM_T / step_counts), np.log(errors), 1)[0]
@@ -183,7 +194,8 @@ def test_step_then_reverse_step_returns_to_start(solver):
     terms = separable_terms(henon_heiles_force)
     h = 0.3
 
-    @jax.jit
+    # Eager, not jitted: two steps are a few hundred small operations, and
+    # compiling them (3.6 s for SofSpa10) costs far more than dispatching them.
     def there_and_back(y0):
         state = solver.init(terms, 0.0, h, y0, None)
         y1, _, _, state, _ = solver.step(terms, 0.0, h, y0, None, state, False)
@@ -260,20 +272,31 @@ def test_kepler_energy_bounded_for_yoshida4_but_drifts_for_tsit5():
     assert np.max(np.abs(angular_momentum(q, p) / initial - 1)) <= 1e-12
 
 
-@pytest.mark.parametrize("solver", SOLVERS, ids=SOLVER_IDS)
-def test_angular_momentum_conserved_to_round_off(solver):
-    """Drifts and central kicks both leave q × p unchanged, so only round-off remains."""
-    t1, steps = 2 * np.pi * 100, 2**13
+# 100 periods at ≈ 82 steps each, saved at 129 step times: one compiled program per
+# solver, shared by the angular-momentum test and the vmap test's loop.
+ORBIT_T1, ORBIT_STEPS = 2 * np.pi * 100, 2**13
+ORBIT_SAVEAT = step_aligned_saveat(ORBIT_T1, ORBIT_STEPS, 128)
+
+
+@eqx.filter_jit
+def kepler_orbit(solver, q0, p0):
+    """(q, p) at the saved times of a 100-period Kepler run from (q0, p0)."""
     sol = solve(
         separable_terms(kepler_force),
         solver,
-        t1,
-        t1 / steps,
-        KEPLER_Y0,
-        step_aligned_saveat(t1, steps, 128),
-        max_steps=steps,
+        ORBIT_T1,
+        ORBIT_T1 / ORBIT_STEPS,
+        (q0, p0),
+        ORBIT_SAVEAT,
+        max_steps=ORBIT_STEPS,
     )
-    q, p = sol.ys
+    return sol.ys
+
+
+@pytest.mark.parametrize("solver", SOLVERS, ids=SOLVER_IDS)
+def test_angular_momentum_conserved_to_round_off(solver):
+    """Drifts and central kicks both leave q × p unchanged, so only round-off remains."""
+    q, p = kepler_orbit(solver, *KEPLER_Y0)
     assert np.abs(kepler_energy(q, p) - kepler_energy(*KEPLER_Y0)).max() > 0
     initial = angular_momentum(*KEPLER_Y0)
     assert np.max(np.abs(angular_momentum(q, p) / initial - 1)) <= 1e-12
@@ -308,25 +331,18 @@ def test_compensated_summation_keeps_round_off_at_machine_precision():
 # --- jit and vmap ------------------------------------------------------------------
 @pytest.mark.parametrize("solver", SOLVERS, ids=SOLVER_IDS)
 def test_vmapped_batch_matches_python_loop(solver):
+    """Eight orbits near the e = 0.6 one, batched by vmap and one at a time.
+
+    The one-at-a-time runs reuse the angular-momentum test's compiled program, so
+    only the batched one is compiled here.
+    """
     keys = jax.random.split(jax.random.key(0), 2)
-    q0s = 0.2 * jax.random.normal(keys[0], (64, 2))
-    p0s = 0.2 * jax.random.normal(keys[1], (64, 2))
-
-    @jax.jit
-    def final_state(q0, p0):
-        sol = solve(
-            separable_terms(henon_heiles_force),
-            solver,
-            5.0,
-            0.1,
-            (q0, p0),
-            diffrax.SaveAt(t1=True),
-            max_steps=64,
-        )
-        return sol.ys[0][-1], sol.ys[1][-1]
-
-    batched = jax.jit(jax.vmap(final_state))(q0s, p0s)
-    looped = [final_state(q0, p0) for q0, p0 in zip(q0s, p0s, strict=True)]
+    q0s = KEPLER_Y0[0] + 0.02 * jax.random.normal(keys[0], (8, 2))
+    p0s = KEPLER_Y0[1] + 0.02 * jax.random.normal(keys[1], (8, 2))
+    batched_orbits = eqx.filter_jit(eqx.filter_vmap(kepler_orbit, in_axes=(None, 0, 0)))
+    batched = batched_orbits(solver, q0s, p0s)
+    looped = [kepler_orbit(solver, q0, p0) for q0, p0 in zip(q0s, p0s, strict=True)]
     stacked = jax.tree_util.tree_map(lambda *leaves: jnp.stack(leaves), *looped)
-    assert not tree_allclose(batched, (q0s, p0s), rtol=0, atol=1e-3)
+    first_save = jax.tree_util.tree_map(lambda leaf: leaf[:, 1], batched)
+    assert not tree_allclose(first_save, (q0s, p0s), rtol=0, atol=1e-3)
     assert tree_allclose(batched, stacked, rtol=1e-13, atol=1e-13)
