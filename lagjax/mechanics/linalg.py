@@ -130,15 +130,20 @@ class _SymmetricFactors(NamedTuple):
     singular: jax.Array
 
 
-def _factor_symmetric(m: jax.Array) -> _SymmetricFactors:
-    """Cholesky factor, whether it is sound, and LU factors only when needed."""
-    n = m.shape[-1]
+def _sound_cholesky(m: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """The Cholesky factor of m and whether it is sound (exists, well conditioned)."""
     # Reads the lower triangle only; a failed factorization comes back as NaN.
     cholesky = jax.lax.linalg.cholesky(m, symmetrize_input=False)
     squared_pivots = jnp.diagonal(cholesky) ** 2  # the pivots of LDLᵀ
     # False for NaN, zero or relatively tiny pivots: then LU solves and judges.
-    threshold = _singular_threshold(n, m.dtype)
-    sound = jnp.min(squared_pivots) > threshold * jnp.max(squared_pivots)
+    threshold = _singular_threshold(m.shape[-1], m.dtype)
+    return cholesky, jnp.min(squared_pivots) > threshold * jnp.max(squared_pivots)
+
+
+def _factor_symmetric(m: jax.Array) -> _SymmetricFactors:
+    """Cholesky factor, whether it is sound, and LU factors only when needed."""
+    n = m.shape[-1]
+    cholesky, sound = _sound_cholesky(m)
 
     def with_lu():
         lu, pivots, singular = _lu_verdict(m)
@@ -189,8 +194,19 @@ def solve_symmetric(m: jax.Array, rhs: jax.Array) -> tuple[jax.Array, jax.Array]
     Cholesky JVP would cost two triangular solves with a matrix, and propagate
     the NaN of a failed factorization).
     """
-    factors = _factor_symmetric(m)
-    return _solve_factored(factors, rhs), factors.singular
+    # Factorization and solve in one branch each: one `cond` per call, where the
+    # derivative rule, which solves twice with the same factors, needs two.
+    cholesky, sound = _sound_cholesky(m)
+
+    def with_lu():
+        by_lu, singular = solve_dense(m, rhs)
+        by_cholesky = jsl.cho_solve((cholesky, True), rhs)
+        return jnp.where(sound, by_cholesky, by_lu), ~sound & singular
+
+    def without_lu():
+        return jsl.cho_solve((cholesky, True), rhs), jnp.zeros((), dtype=bool)
+
+    return jax.lax.cond(_any_in_batch(~sound), with_lu, without_lu)
 
 
 @solve_symmetric.defjvp
