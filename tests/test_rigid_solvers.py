@@ -190,12 +190,16 @@ def test_simulate_scan_path_vmap_and_grad():
     def spin_after(omega):
         return final(omega)[0][1][2]
 
-    # A batch of starts in one vmapped run (here: central differences) ...
+    @jax.jit
+    def spins_and_gradient(omega):  # one compilation for the batch and the grad
+        # A batch of starts in one vmapped run (here: central differences) ...
+        shifts = jnp.concatenate([step * jnp.eye(3), -step * jnp.eye(3)])
+        spins = jax.vmap(spin_after)(omega + shifts)
+        # ... and reverse mode through the steps and the autodiff torque inside.
+        return spins, jax.grad(spin_after)(omega)
+
     step = 1e-6
-    shifts = jnp.concatenate([step * jnp.eye(3), -step * jnp.eye(3)])
-    spins = jax.vmap(spin_after)(OMEGA0 + shifts)
-    # ... and reverse mode through the steps and the autodiff torque inside them.
-    grad = jax.grad(spin_after)(OMEGA0)
+    spins, grad = spins_and_gradient(OMEGA0)
     assert np.allclose(grad, (spins[:3] - spins[3:]) / (2 * step), rtol=1e-6)
 
 
