@@ -21,6 +21,11 @@ def oscillator_hamiltonian():
     )
 
 
+# One instance for the tests whose runs compile alike (a new instance has new
+# functions, so its runs compile again).
+OSCILLATOR = oscillator_hamiltonian()
+
+
 def exact_oscillator(x0, v0, w, t):
     return x0 * np.cos(w * t) + v0 / w * np.sin(w * t)
 
@@ -84,7 +89,7 @@ def test_lagrangian_through_gauss_legendre_conserves_energy():
 
 
 def test_vmap_equals_loop_and_sweep():
-    system = oscillator_hamiltonian()
+    system = OSCILLATOR
     x0s = jnp.linspace(-1.0, 1.0, 8)
     omegas = jnp.linspace(0.5, 2.0, 8)
 
@@ -126,7 +131,8 @@ def test_forward_mode_jacobian():
         )
         return jnp.stack([traj.q[-1], traj.p[-1]])
 
-    jac = jax.jacfwd(final_state)(jnp.array([0.2, 0.1]))
+    # Jitted: eagerly, jacfwd's bookkeeping around the run compiles piece by piece.
+    jac = jax.jit(jax.jacfwd(final_state))(jnp.array([0.2, 0.1]))
     c, s = np.cos(OMEGA * t1), np.sin(OMEGA * t1)
     expected = np.array([[c, s / OMEGA], [-OMEGA * s, c]])
     assert np.allclose(jac, expected, atol=1e-8)
@@ -237,9 +243,11 @@ def test_save_at_every_step_is_not_mistaken_for_a_failure():
 
 
 def test_numpy_and_jax_scalar_times_and_variational_refusal():
-    system = oscillator_hamiltonian()
+    system = OSCILLATOR
+    # Array y0 and args of the vmap test's types: its compiled run serves both.
+    start, omega = (jnp.float64(1.0), 0.0), jnp.float64(OMEGA)
     for t1, dt in [(np.float64(1.0), np.float64(0.01)), (jnp.asarray(1.0), 0.01)]:
-        traj = lj.simulate(system, (1.0, 0.0), t1=t1, dt=dt, args=OMEGA)
+        traj = lj.simulate(system, start, t1=t1, dt=dt, args=omega)
         assert np.isclose(traj.q[-1], np.cos(OMEGA), atol=1e-8)
     # Traced times still work (inside jit, dt and t1 as arguments).
     traced = jax.jit(
