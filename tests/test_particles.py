@@ -45,10 +45,10 @@ def random_cluster(count, seed, dimension=3):
     return masses, positions, masses[:, None] * velocities
 
 
-def test_potential_and_forces_match_the_pair_sums():
-    masses, q, _ = random_cluster(5, seed=1)
-    strengths = jnp.asarray(np.random.default_rng(2).uniform(0.5, 2.0, (5, 5)))
-    strengths = strengths + strengths.T
+@jax.jit
+def pair_sums(masses, q, strengths):
+    """The builder's potential, forces and an excluded pair against sums by hand,
+    in one compiled call (dispatched eagerly, each small expression compiles)."""
     field = lambda r: 0.5 * jnp.sum(r**2) + r[2]
     potential = particle_potential(
         soft_core_lennard_jones,
@@ -61,18 +61,32 @@ def test_potential_and_forces_match_the_pair_sums():
         strengths[i, j] * soft_core_lennard_jones(jnp.linalg.norm(q[i] - q[j]))
         for i, j in pairs
     ) + sum(masses[i] * field(q[i]) for i in range(5))
-    assert relative_close(potential(q), by_hand, 1e-14)
     pair_only = jax.grad(lambda x: pair_energy(x, soft_core_lennard_jones, strengths))
     forces = -pair_only(q)
-    # Strong law of action and reaction: no net force and no net torque.
-    assert float(jnp.max(jnp.abs(jnp.sum(forces, 0)))) < ROUND_OFF
-    assert float(jnp.max(jnp.abs(total_angular_momentum(q, forces)))) < ROUND_OFF
-    # Excluding a pair removes exactly its term.
     keep = jnp.ones((5, 5), bool).at[0, 3].set(False).at[3, 0].set(False)
-    excluded = pair_energy(q, soft_core_lennard_jones, strengths, interacting=keep)
-    term = strengths[0, 3] * soft_core_lennard_jones(jnp.linalg.norm(q[0] - q[3]))
-    full = pair_energy(q, soft_core_lennard_jones, strengths)
-    assert relative_close(excluded + term, full, 1e-14)
+    return dict(
+        potential=potential(q),
+        by_hand=by_hand,
+        net_force=jnp.sum(forces, 0),
+        net_torque=total_angular_momentum(q, forces),
+        excluded=pair_energy(q, soft_core_lennard_jones, strengths, interacting=keep),
+        term=strengths[0, 3] * soft_core_lennard_jones(jnp.linalg.norm(q[0] - q[3])),
+        full=pair_energy(q, soft_core_lennard_jones, strengths),
+    )
+
+
+def test_potential_and_forces_match_the_pair_sums():
+    masses, q, _ = random_cluster(5, seed=1)
+    strengths = np.random.default_rng(2).uniform(0.5, 2.0, (5, 5))
+    found = jax.tree_util.tree_map(
+        np.asarray, pair_sums(masses, q, strengths + strengths.T)
+    )
+    assert relative_close(found["potential"], found["by_hand"], 1e-14)
+    # Strong law of action and reaction: no net force and no net torque.
+    assert float(np.max(np.abs(found["net_force"]))) < ROUND_OFF
+    assert float(np.max(np.abs(found["net_torque"]))) < ROUND_OFF
+    # Excluding a pair removes exactly its term.
+    assert relative_close(found["excluded"] + found["term"], found["full"], 1e-14)
 
 
 def plain_pair_sum(q, strengths):
@@ -113,8 +127,9 @@ def test_custom_derivative_rule_matches_plain_autodiff():
     )
 
 
-def test_lagrangian_and_hamiltonian_forms_agree():
-    masses, q, p = random_cluster(3, seed=3)
+@jax.jit
+def both_forms(masses, q, p):
+    """Hamilton's and Euler–Lagrange's equations and the two energies, compiled."""
     ham = newtonian_gravity(masses, softening=0.1)
     lag = particle_lagrangian(
         masses,
@@ -123,10 +138,21 @@ def test_lagrangian_and_hamiltonian_forms_agree():
     )
     velocities = p / masses[:, None]
     qdot, pdot = ham.vector_field(q, p)
-    assert relative_close(qdot, velocities, 1e-15)
-    acceleration = lag.acceleration(q, velocities)
-    assert relative_close(acceleration, pdot / masses[:, None], 1e-13)
-    assert relative_close(lag.energy(q, velocities), ham(q, p), 1e-14)
+    return dict(
+        velocities=velocities,
+        qdot=qdot,
+        acceleration=lag.acceleration(q, velocities),
+        force_over_mass=pdot / masses[:, None],
+        lagrangian_energy=lag.energy(q, velocities),
+        hamiltonian=ham(q, p),
+    )
+
+
+def test_lagrangian_and_hamiltonian_forms_agree():
+    found = jax.tree_util.tree_map(np.asarray, both_forms(*random_cluster(3, seed=3)))
+    assert relative_close(found["qdot"], found["velocities"], 1e-15)
+    assert relative_close(found["acceleration"], found["force_over_mass"], 1e-13)
+    assert relative_close(found["lagrangian_energy"], found["hamiltonian"], 1e-14)
 
 
 def test_diagnostics_in_the_plane_and_bad_input():
