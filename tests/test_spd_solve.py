@@ -17,7 +17,11 @@ import numpy as np
 import pytest
 
 import lagjax as lj
-from lagjax.mechanics.linalg import solve_dense, solve_symmetric
+from lagjax.mechanics.linalg import (
+    solve_dense,
+    solve_symmetric,
+    solve_unrolled_symmetric,
+)
 from tests.helpers import relative_close
 
 N = 7
@@ -174,3 +178,34 @@ def test_grad_of_the_scalar_formulation_matches_finite_differences():
         for e in step * np.eye(n)
     ]
     assert relative_close(gradient, np.array(finite), 1e-7)
+
+
+def _unrolled(m, b):
+    n = b.shape[0]
+    upper = [[m[i, j] if j >= i else None for j in range(n)] for i in range(n)]
+    return solve_unrolled_symmetric(upper, [b[i] for i in range(n)])
+
+
+def test_unrolled_form_exact_in_a_mixed_batch_with_nan_free_gradients():
+    rng = np.random.default_rng(5)
+    n = 5
+    masses = np.stack(
+        [
+            positive_definite(rng, n),
+            indefinite_zero_minor(rng, n),
+            singular_symmetric(rng, n),
+        ]
+    )
+    rhs = rng.normal(size=(3, n))
+    x, singular = jax.jit(jax.vmap(_unrolled))(masses, rhs)
+    for member in range(2):
+        expected = np.linalg.solve(masses[member], rhs[member])
+        assert relative_close(x[member], expected, 1e-12)
+    assert list(np.asarray(singular)) == [False, False, True]
+    weights = rng.normal(size=(2, n))
+    grad_b = jax.jit(
+        jax.grad(lambda b: jnp.sum(weights * jax.vmap(_unrolled)(masses[:2], b)[0]))
+    )(rhs[:2])
+    for member in range(2):
+        adjoint = np.linalg.solve(masses[member].T, weights[member])
+        assert relative_close(grad_b[member], adjoint, 1e-11)

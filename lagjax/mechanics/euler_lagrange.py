@@ -40,6 +40,7 @@ from .linalg import (
     raise_if_singular,
     solve_symmetric,
     solve_unrolled,
+    solve_unrolled_symmetric,
 )
 from .scalarize import scalar_argument_function
 
@@ -102,13 +103,14 @@ def _dense_system(lag_flat: FlatLagrangian, q, v, t):
     return mass, force - transport
 
 
-def _solve_scalar(mass, rhs, poison: bool) -> tuple[jax.Array, jax.Array]:
+def _solve_scalar(system: Callable, poison: bool) -> tuple[jax.Array, jax.Array]:
+    """Solve the scalar form's system, given as the function that builds it."""
+    mass, rhs = system()
     n = len(rhs)
     if n <= UNROLLED_SOLVE_LIMIT:
         x, singular = solve_unrolled(mass, rhs, poison=poison)
         return jnp.stack(x), singular
-    full = [[mass[min(i, j)][max(i, j)] for j in range(n)] for i in range(n)]
-    return solve_symmetric(jnp.stack([jnp.stack(row) for row in full]), jnp.stack(rhs))
+    return solve_unrolled_symmetric(mass, rhs, system)
 
 
 # Compiled so that eager calls do not dispatch the scalar derivation op by op; under
@@ -149,10 +151,14 @@ def euler_lagrange_acceleration(
     lag_flat, q_flat, v_flat, t, unravel = flat_lagrangian(lagrangian, q, qdot, t, args)
     force = None if generalized_force is None else ravel_pytree(generalized_force)[0]
     if q_flat.shape[0] <= SCALAR_COORDINATE_LIMIT:
-        mass, rhs = _scalar_system(lag_flat, q_flat, v_flat, t)
-        if force is not None:
-            rhs = [r + force[i] for i, r in enumerate(rhs)]
-        qddot, singular = _solve_scalar(mass, rhs, poison=check == "nan")
+
+        def scalar_system():
+            mass, rhs = _scalar_system(lag_flat, q_flat, v_flat, t)
+            if force is not None:
+                rhs = [r + force[i] for i, r in enumerate(rhs)]
+            return mass, rhs
+
+        qddot, singular = _solve_scalar(scalar_system, poison=check == "nan")
     else:
         mass, rhs_array = _dense_system(lag_flat, q_flat, v_flat, t)
         if force is not None:

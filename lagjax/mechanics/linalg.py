@@ -1,12 +1,15 @@
 """Small linear solves with a singularity check, for mass matrices and Hessians.
 
 Mechanics solves M x = b where M = ∂²L/∂q̇∂q̇ (or ∂²H/∂p∂p) is small, symmetric and,
-for physical systems, positive definite. Three forms:
+for physical systems, positive definite. Four forms:
 
 - `solve_unrolled` works on Python lists of scalars for n ≤ 3 (closed-form inverse by
   cofactors). On CPU this keeps the whole integration step in one fused XLA kernel,
   which a batched `jnp.linalg.solve` on a 2×2 matrix does not (see
   `benchmarks/derivation_overhead.py`).
+- `solve_unrolled_symmetric` works on lists of scalars for a few more (the scalar
+  formulation's 4–6 coordinates): unrolled LDLᵀ, fused like the cofactor form,
+  with the LU fallback of `solve_symmetric` for an indefinite or singular M.
 - `solve_dense` works on arrays of any size (LU with partial pivoting).
 - `solve_symmetric` works on arrays of any size for a symmetric M that is usually
   positive definite: Cholesky (half the work of LU, and what a hand-written solver
@@ -19,6 +22,7 @@ a run-time error with `raise_if_singular` instead of passing on inf/NaN.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any, NamedTuple
 
 import equinox as eqx
@@ -218,6 +222,83 @@ def _solve_symmetric_jvp(primals, tangents) -> tuple[Any, Any]:
     dx = _solve_factored(factors, drhs - dm @ x)
     no_tangent = np.zeros(factors.singular.shape, dtype=jax.dtypes.float0)
     return (x, factors.singular), (dx, no_tangent)
+
+
+def _unrolled_ldl_solve(
+    m: list[list[jax.Array]], rhs: list[jax.Array]
+) -> tuple[list[jax.Array], list[jax.Array]]:
+    """x from M = L D Lᵀ without pivoting, in scalars, and the pivots D (raw).
+
+    Only the upper triangle of `m` is read. A pivot that is not positive is
+    replaced by 1 before it divides anything, so the answer stays finite (and its
+    derivatives NaN-free) where it will be discarded.
+    """
+    n = len(rhs)
+    lower: list[list[jax.Array]] = [[] for _ in range(n)]  # lower[i][k], k < i
+    raw, pivots = [], []
+    for j in range(n):
+        pivot = m[j][j]
+        for k in range(j):
+            pivot = pivot - lower[j][k] * lower[j][k] * pivots[k]
+        raw.append(pivot)
+        pivots.append(jnp.where(pivot > 0, pivot, jnp.ones_like(pivot)))
+        for i in range(j + 1, n):
+            entry = m[j][i]
+            for k in range(j):
+                entry = entry - lower[i][k] * lower[j][k] * pivots[k]
+            lower[i].append(entry / pivots[j])
+    y = []
+    for i in range(n):
+        value = rhs[i]
+        for k in range(i):
+            value = value - lower[i][k] * y[k]
+        y.append(value)
+    x: list[jax.Array] = [y[i] / pivots[i] for i in range(n)]
+    for i in reversed(range(n)):
+        for k in range(i + 1, n):
+            x[i] = x[i] - lower[k][i] * x[k]
+    return x, raw
+
+
+def solve_unrolled_symmetric(
+    m: list[list[jax.Array]],
+    rhs: list[jax.Array],
+    system: Callable[[], tuple[list[list[jax.Array]], list[jax.Array]]] | None = None,
+) -> tuple[jax.Array, jax.Array]:
+    """Solve a symmetric system given as lists of scalars (upper triangle read).
+
+    $LDL^T$ without pivoting, unrolled into scalar arithmetic, which fuses into
+    the surrounding step (no LAPACK call, whose fixed cost dominates at n ≤ 6);
+    when a pivot is not positive or below `solve_dense`'s relative threshold (M
+    indefinite, singular or nearly so), LU with partial pivoting on the assembled
+    matrix solves and judges, in a `lax.cond` whose predicate is reduced over the
+    batch under `vmap`, as in `solve_symmetric`. Returns `(x, singular)`.
+
+    `system`, when given, returns `(m, rhs)` again: the fallback branch calls it
+    instead of taking the n² + n scalars as its operands, so that its operands are
+    the (few) inputs they were computed from. Handing the branch the scalars made
+    XLA split the fused step around them: the n-link pendulum's step at n = 6 went
+    from 0.27× to 1.9× its hand-written twin (`benchmarks/derivation_overhead.py`).
+    """
+    n = len(rhs)
+    x, raw = _unrolled_ldl_solve(m, rhs)
+    smallest, largest = raw[0], raw[0]
+    for pivot in raw[1:]:
+        smallest, largest = jnp.minimum(smallest, pivot), jnp.maximum(largest, pivot)
+    sound = smallest > _singular_threshold(n, jnp.result_type(smallest)) * largest
+    by_ldl = jnp.stack(x)
+
+    def with_lu():
+        upper, vector = (m, rhs) if system is None else system()
+        full = [[upper[min(i, j)][max(i, j)] for j in range(n)] for i in range(n)]
+        matrix = jnp.stack([jnp.stack(row) for row in full])
+        by_lu, singular = solve_dense(matrix, jnp.stack(vector))
+        return jnp.where(sound, by_ldl, by_lu), ~sound & singular
+
+    def without_lu():
+        return by_ldl, jnp.zeros((), dtype=bool)
+
+    return jax.lax.cond(_any_in_batch(~sound), with_lu, without_lu)
 
 
 def singular_message_for(what: str) -> str:
