@@ -10,8 +10,10 @@ time is the median of repeats after a warm-up, with `block_until_ready`.
 
 n-link pendulum (unit masses and rods), L written vector-style with `jnp.cumsum`
 over the link velocities, 2·10³ RK4 steps, single and vmapped over 64 states: the
-default `Lagrangian(L).acceleration` (scalar formulation up to 6 coordinates, dense
-beyond) against hand-written twins with the closed-form mass matrix
+default `Lagrangian(L).acceleration` (scalar formulation up to 6 coordinates —
+cofactor solve up to 3, unrolled LDLᵀ beyond —, dense beyond 6 with a Cholesky
+solve; both fall back to LU only for an indefinite or singular M) against
+hand-written twins with the closed-form mass matrix
 M_ij = (n − max(i, j)) cos(θ_i − θ_j) solved by Cholesky (`cho_factor`/`cho_solve`)
 or by LU (`jnp.linalg.solve`); the ratio is to the faster twin, and a closing
 table lists it per size (single and batched) with the twin that was faster.
