@@ -62,6 +62,9 @@ def eccentric_anomaly(mean_anomaly: jax.Array, eccentricity: jax.Array) -> jax.A
 
     start = jnp.full_like(half_turn, jnp.pi)
     anomaly = jax.lax.fori_loop(0, _KEPLER_NEWTON_ITERATIONS, newton_step, start)
+    # The root for M in [0, π] lies in [0, π]; Newton's last step can overshoot
+    # M = 0 by round-off (−1e-306 was seen), which would leave [0, 2π).
+    anomaly = jnp.clip(anomaly, 0.0, jnp.pi)
     return jnp.where(upper_half, 2 * jnp.pi - anomaly, anomaly)
 
 
