@@ -160,24 +160,19 @@ def test_grad_through_simulate_matches_finite_differences():
     assert relative_close(gradient, np.array(finite), 1e-7)
 
 
-def test_grad_of_the_scalar_formulation_matches_finite_differences():
-    n = 4  # the scalar formulation, whose 4–6 coordinates use the same solve
-    lag = lj.Lagrangian(n_link_lagrangian)
-    qd = jnp.linspace(-0.2, 0.3, n)
-    weights = jnp.arange(1.0, n + 1.0)
-
-    @jax.jit
-    def weighted_acceleration(q):
-        return jnp.sum(weights * lag.acceleration(q, qd))
-
-    q = jnp.linspace(0.3, 1.0, n)
-    gradient = jax.jit(jax.grad(weighted_acceleration))(q)
+def test_tangent_of_the_scalar_formulation_matches_finite_differences():
+    n = 4  # the scalar formulation, whose 4–6 coordinates use the unrolled solve
+    acceleration = jax.jit(lj.Lagrangian(n_link_lagrangian).acceleration)
+    q, qd = jnp.linspace(0.3, 1.0, n), jnp.linspace(-0.2, 0.3, n)
+    direction = jnp.linspace(1.0, -0.5, n)
+    tangent = jax.jit(
+        lambda x: jax.jvp(lambda y: acceleration(y, qd), (x,), (direction,))[1]
+    )(q)
     step = 1e-5
-    finite = [
-        (weighted_acceleration(q + e) - weighted_acceleration(q - e)) / (2 * step)
-        for e in step * np.eye(n)
-    ]
-    assert relative_close(gradient, np.array(finite), 1e-7)
+    finite = (
+        acceleration(q + step * direction, qd) - acceleration(q - step * direction, qd)
+    ) / (2 * step)
+    assert relative_close(tangent, finite, 1e-7)
 
 
 def _unrolled(m, b):
@@ -203,9 +198,17 @@ def test_unrolled_form_exact_in_a_mixed_batch_with_nan_free_gradients():
         assert relative_close(x[member], expected, 1e-12)
     assert list(np.asarray(singular)) == [False, False, True]
     weights = rng.normal(size=(2, n))
-    grad_b = jax.jit(
-        jax.grad(lambda b: jnp.sum(weights * jax.vmap(_unrolled)(masses[:2], b)[0]))
-    )(rhs[:2])
+    grad_m, grad_b = jax.jit(
+        jax.grad(
+            lambda m, b: jnp.sum(weights * jax.vmap(_unrolled)(m, b)[0]),
+            argnums=(0, 1),
+        )
+    )(masses[:2], rhs[:2])
     for member in range(2):
         adjoint = np.linalg.solve(masses[member].T, weights[member])
+        x = np.linalg.solve(masses[member], rhs[member])
         assert relative_close(grad_b[member], adjoint, 1e-11)
+        # Only the upper triangle is read: the symmetric pair's sum lands there.
+        full = -np.outer(adjoint, x)
+        expected = np.triu(full + full.T) - np.diag(np.diag(full))
+        assert relative_close(grad_m[member], expected, 1e-11)
