@@ -8,6 +8,11 @@ import pytest
 
 from lagjax.cli import main
 
+# Whole runs of the command (scenes integrated, plotted, saved): CI's second step,
+# `bash tasks.sh integration`. The command's refusals of bad input are checked by
+# test_failures_cli.py in the default run.
+pytestmark = pytest.mark.integration
+
 
 def test_scenes_lists_every_scene(capsys):
     assert main(["scenes"]) == 0

@@ -12,6 +12,11 @@ import matplotlib
 
 matplotlib.use("Agg")  # plt.show() is a no-op; no display needed
 import matplotlib.pyplot as plt
+import pytest
+
+# The guide's examples run whole, like the notebooks: CI's second step
+# (`bash tasks.sh integration`).
+pytestmark = pytest.mark.integration
 
 README = Path(__file__).resolve().parent.parent / "README.md"
 FENCE = re.compile(r"^```python\n(.*?)^```", re.MULTILINE | re.DOTALL)

@@ -140,6 +140,8 @@ def n_link_lagrangian(q, qd):
     return 0.5 * jnp.sum(vx**2 + vy**2) + 9.81 * jnp.sum(jnp.cumsum(jnp.cos(q)))
 
 
+# 7 s of compile; the jvp/grad rules are checked above and below by default.
+@pytest.mark.slow
 def test_grad_through_simulate_matches_finite_differences():
     n = 7  # the dense formulation
     lag = lj.Lagrangian(n_link_lagrangian)
