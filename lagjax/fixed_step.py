@@ -10,23 +10,31 @@ progress meter, when only the final state is saved or the save times lie on the
 step grid at a uniform spacing (`ts = linspace` over multiples of dt, every k-th
 step): then two nested scans save without interpolation. The other savings —
 `ts` off the grid, `SaveAt(steps=...)`, dense output — are scans too
-(`scan_saving.py`, `off_grid_saves.py`, built on `step_function` and
+(`scan_saving.py`, `off_grid_saves.py`, built on the step bodies and
 `integrate_every_step` here). The solver and its `step` are the same diffrax
 objects, so results match `diffeqsolve` with `ConstantStepSize` to round-off when
 the span is a whole number of steps; otherwise the scans shorten the last step
 where diffrax spreads the span over equal steps.
+
+Two step bodies: `tracking_step_function` takes every step and keeps the last good
+state beside the running one (failures are detected cheaply, acted on after the
+loop), so nothing on the path from one step to the next splits XLA's fused step;
+`step_function` refuses to take a failed step or one past a bound, for the
+off-grid saves whose inner scans have a fixed length.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, NamedTuple
 
 import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+
+from .solvers.splitting import AbstractSplittingSolver
 
 
 def fixed_step_count(t0: float, t1: float, dt: float) -> int:
@@ -42,10 +50,88 @@ def fixed_step_count(t0: float, t1: float, dt: float) -> int:
     return max(1, math.ceil(ratio))
 
 
+def _attempt_step(terms, solver, times, y, solver_state, result, args, counts):
+    """One step from `y` and the run's result after it: `(y_next, state_next,
+    dense_info, result)`.
+
+    A failure — the solver's own `RESULTS`, or a non-finite state
+    (`RESULTS.nonfinite`: one sum of the state, inside the fused step) — is
+    recorded in `result` when `counts` and the run had not failed before; the
+    first failure is the one kept.
+    """
+    start, end = times
+    y_next, _, dense_info, state_next, step_result = solver.step(
+        terms, start, end, y, args, solver_state, False
+    )
+    step_result = diffrax.RESULTS.where(
+        all_finite(y_next),
+        step_result,
+        diffrax.RESULTS.nonfinite,  # pyright: ignore[reportArgumentType]
+    )
+    counts = counts & (result == diffrax.RESULTS.successful)
+    return (
+        y_next,
+        state_next,
+        dense_info,
+        diffrax.RESULTS.where(counts, step_result, result),
+    )
+
+
 def step_function(
-    terms, solver, t0, dt, args, dtype, last_step=None, t1=None, emit=None, until=None
+    terms, solver, t0, dt, args, dtype, last_step=None, t1=None, until=None
 ):
-    """The scan body of one fixed step k → k + 1, carrying (y, state, result, k).
+    """The scan body of one fixed step k → k + 1, carrying (y, state, result, k),
+    that does not take a failed step or any step from index `until` on.
+
+    A step not taken leaves the state, the solver's state (e.g. a compensated
+    sum's error term) and the step index as they were, so a scan of fixed length
+    can take a varying number of steps (`off_grid_saves`), and a failed run stops
+    at its last good step. Those selects sit on the path from one step to the
+    next and split XLA's fused step: the runs that need neither use
+    `tracking_step_function`. Times are those of `step_times`.
+    """
+
+    def one_step(carry, _):
+        y, solver_state, result, k = carry
+        times = step_times(t0, dt, k, dtype, last_step, t1)
+        counts = jnp.asarray(True) if until is None else k < until
+        y_next, state_next, _, result = _attempt_step(
+            terms, solver, times, y, solver_state, result, args, counts
+        )
+        stay = (result != diffrax.RESULTS.successful) | ~counts
+        y, solver_state = jax.tree_util.tree_map(
+            lambda new, old: jnp.where(stay, old, new),
+            (y_next, state_next),
+            (y, solver_state),
+        )
+        return (y, solver_state, result, jnp.where(stay, k, k + 1)), None
+
+    return one_step
+
+
+class TrackingCarry(NamedTuple):
+    """What a scan of `tracking_step_function` carries from step to step."""
+
+    y: Any  # the state the next step starts from (poisoned after a failure)
+    solver_state: Any
+    result: Any  # the first failure, or successful
+    k: Any  # steps computed
+    last_good: Any  # the state after the last step that did not fail
+    taken: Any  # steps up to and including that one
+
+
+def tracking_step_function(
+    terms, solver, t0, dt, args, dtype, last_step=None, t1=None, emit=None
+):
+    """The scan body of one fixed step k → k + 1 over a `TrackingCarry`.
+
+    Detect cheaply, diagnose late: every step is taken, a failure only recorded
+    in `result`, and the state runs on (poisoned) after it; beside it the carry
+    keeps the last good state and the number of steps that reached it. Those
+    selects are off the path from one step to the next, so XLA keeps the step
+    one fused kernel: Kepler with compensated Störmer–Verlet 30 → 25 ns per step
+    (`benchmarks/solver_overhead.py`), with bit-identical results. So a failed
+    run still returns what it computed up to the failure and where it stopped.
 
     Times are formed from the step index (t0 + k·dt), not accumulated, so every
     step has the same h to the last bit on an exact grid (`step_grid`). The step
@@ -54,53 +140,62 @@ def step_function(
     Kepler with Yoshida4, 2× on a rigid body; bit-identical results). When
     `last_step` is given, that step ends exactly at `t1` (a shortened last step).
 
-    A failed step (the solver's own `RESULTS`, or a non-finite state:
-    `RESULTS.nonfinite`) is not taken: the state and the step index stay at the
-    last good step for the rest of the scan, so a failed run returns what it
-    computed up to the failure and where it stopped. Detection is cheap — one
-    sum of the state and two selects per step, inside the fused step
-    (`benchmarks/solver_overhead.py` measures the loop with it).
-
-    `emit(y, dense_info)`, when given, is what the scan outputs per step (the new
-    state for `SaveAt(steps=True)`, the dense information for dense output).
-    `until`, when given, is a step index the scan does not pass: steps from it on
-    are computed and not taken (the same selects), so a scan of fixed length can
-    take a varying number of steps (`off_grid_saves`).
+    `emit(y, dense_info)`, when given, is what the scan outputs per step (the
+    last good state for `SaveAt(steps=True)`, the dense information for dense
+    output).
     """
 
-    def one_step(carry, _):
-        y, solver_state, result, k = carry
-        start, end = step_times(t0, dt, k, dtype, last_step, t1)
-        y_next, _, dense_info, state_next, step_result = solver.step(
-            terms, start, end, y, args, solver_state, False
+    def one_step(carry: TrackingCarry, _):
+        times = step_times(t0, dt, carry.k, dtype, last_step, t1)
+        y_next, state_next, dense_info, result = _attempt_step(
+            terms, solver, times, carry.y, carry.solver_state, carry.result, args,
+            jnp.asarray(True),
+        )  # fmt: skip
+        good = result == diffrax.RESULTS.successful
+        last_good = jax.tree_util.tree_map(
+            lambda new, old: jnp.where(good, new, old), y_next, carry.last_good
         )
-        step_result = diffrax.RESULTS.where(
-            all_finite(y_next),
-            step_result,
-            diffrax.RESULTS.nonfinite,  # pyright: ignore[reportArgumentType]
-        )
-        counts = result == diffrax.RESULTS.successful
-        if until is not None:
-            counts = counts & (k < until)  # a step not taken cannot fail the run
-        result = diffrax.RESULTS.where(counts, step_result, result)
-        failed = result != diffrax.RESULTS.successful
-        stay = failed if until is None else failed | (k >= until)
-
-        def keep(new, old):
-            return jnp.where(stay, old, new)
-
-        if until is None:
-            y, solver_state = jax.tree_util.tree_map(keep, y_next, y), state_next
-        else:
-            # A step not taken leaves the solver's state (e.g. a compensated sum's
-            # error term) as it was, too.
-            y, solver_state = jax.tree_util.tree_map(
-                keep, (y_next, state_next), (y, solver_state)
-            )
-        carry = (y, solver_state, result, jnp.where(stay, k, k + 1))
-        return carry, None if emit is None else emit(y, dense_info)
+        taken = jnp.where(good, carry.k + 1, carry.taken)
+        new = TrackingCarry(y_next, state_next, result, carry.k + 1, last_good, taken)
+        return new, None if emit is None else emit(last_good, dense_info)
 
     return one_step
+
+
+def tracking_scan(
+    one_step, carry: TrackingCarry, length: int, solver: diffrax.AbstractSolver
+):
+    """`lax.scan` of a `tracking_step_function` body, `steps_per_trip(solver)`
+    steps per loop iteration (the arithmetic of each step is unchanged)."""
+    unroll = steps_per_trip(solver)
+    return jax.lax.scan(one_step, carry, None, length=length, unroll=unroll)
+
+
+# Splittings with up to this many force evaluations per step run two steps per
+# loop iteration (see `steps_per_trip`).
+UNROLLED_SPLITTING_STAGES = 6
+
+
+def steps_per_trip(solver: diffrax.AbstractSolver) -> int:
+    """How many steps one iteration of the fixed-step loop takes: 2 for the short
+    explicit splittings, 1 otherwise.
+
+    Unrolled by two, XLA fuses across the step boundary and the loop's own cost is
+    paid half as often: Kepler with compensated Störmer–Verlet 25 → 20 ns per step,
+    Yoshida4 59 → 53 (`benchmarks/solver_overhead.py`). For longer steps (an
+    eighth-order composition, an implicit stage solve, a Lie–Poisson step of
+    nested scans) the loop's cost is a small part of the step and unrolling
+    measured no gain, while it doubles the compiled loop body (compile time of the
+    splitting, implicit and rigid-body test files +10 %).
+    """
+    # A wrapper (the Hermite extension, a projection) steps like what it wraps;
+    # diffrax's wrappers also pass `isinstance` checks for it, hence the unwrapping.
+    while isinstance(solver, diffrax.AbstractWrappedSolver):
+        solver = solver.solver
+    if isinstance(solver, AbstractSplittingSolver):
+        stages = len(solver.drift_coefficients)
+        return 2 if stages <= UNROLLED_SPLITTING_STAGES else 1
+    return 1
 
 
 def step_times(t0, dt, k, dtype, last_step=None, t1=None) -> tuple[Any, Any]:
@@ -123,6 +218,11 @@ def initial_carry(terms, solver, t0, dt, y0, args, dtype):
         terms, jnp.asarray(t0, dtype), jnp.asarray(t0 + dt, dtype), y0, args
     )
     return (y0, state, diffrax.RESULTS.successful, jnp.asarray(0))
+
+
+def initial_tracking_carry(terms, solver, t0, dt, y0, args, dtype) -> TrackingCarry:
+    y0, state, result, k = initial_carry(terms, solver, t0, dt, y0, args, dtype)
+    return TrackingCarry(y0, state, result, k, y0, k)
 
 
 # Compiled once per (terms, solver, times, state structure): terms and solvers are
@@ -148,10 +248,10 @@ def integrate_fixed_steps(
     """
     steps = fixed_step_count(t0, t1, dt)
     dt = math.copysign(abs(dt), t1 - t0)
-    one_step = step_function(terms, solver, t0, dt, args, dtype, steps - 1, t1)
-    initial = initial_carry(terms, solver, t0, dt, y0, args, dtype)
-    (y1, _, result, taken), _ = jax.lax.scan(one_step, initial, None, length=steps)
-    return y1, result, taken
+    one_step = tracking_step_function(terms, solver, t0, dt, args, dtype, steps - 1, t1)
+    initial = initial_tracking_carry(terms, solver, t0, dt, y0, args, dtype)
+    final, _ = tracking_scan(one_step, initial, steps, solver)
+    return final.last_good, final.result, final.taken
 
 
 def uniform_grid_saves(
@@ -198,21 +298,24 @@ def integrate_fixed_steps_saving(
     the saves a failure (see `step_function`) kept from being reached.
     """
     lead, every, saves = grid
-    one_step = step_function(terms, solver, t0, dt, args, dtype)
-    carry = initial_carry(terms, solver, t0, dt, y0, args, dtype)
+    one_step = tracking_step_function(terms, solver, t0, dt, args, dtype)
+    carry = initial_tracking_carry(terms, solver, t0, dt, y0, args, dtype)
     if lead:
-        carry, _ = jax.lax.scan(one_step, carry, None, length=lead)
-    first = carry[0], carry[2] == diffrax.RESULTS.successful
+        carry, _ = tracking_scan(one_step, carry, lead, solver)
+
+    def save(carry: TrackingCarry):
+        return carry.last_good, carry.result == diffrax.RESULTS.successful
 
     def interval(carry, _):
-        carry, _ = jax.lax.scan(one_step, carry, None, length=every)
-        return carry, (carry[0], carry[2] == diffrax.RESULTS.successful)
+        carry, _ = tracking_scan(one_step, carry, every, solver)
+        return carry, save(carry)
 
+    first = save(carry)
     carry, later = jax.lax.scan(interval, carry, None, length=saves - 1)
     ys, saved = jax.tree_util.tree_map(
         lambda a, b: jnp.concatenate([jnp.asarray(a)[None], b]), first, later
     )
-    return ys, carry[2], carry[3], saved
+    return ys, carry.result, carry.taken, saved
 
 
 @eqx.filter_jit
@@ -242,8 +345,10 @@ def integrate_every_step(
     def emit(y, dense_info):
         return (y if states else None), (dense_info if dense else None)
 
-    one_step = step_function(terms, solver, t0, dt, args, dtype, steps - 1, t1, emit)
-    initial = initial_carry(terms, solver, t0, dt, y0, args, dtype)
-    (y1, _, result, taken), kept = jax.lax.scan(one_step, initial, None, length=steps)
+    one_step = tracking_step_function(
+        terms, solver, t0, dt, args, dtype, steps - 1, t1, emit
+    )
+    initial = initial_tracking_carry(terms, solver, t0, dt, y0, args, dtype)
+    final, kept = tracking_scan(one_step, initial, steps, solver)
     ys, infos = kept  # pyright: ignore[reportGeneralTypeIssues]
-    return y1, ys, infos, result, taken
+    return final.last_good, ys, infos, final.result, final.taken

@@ -84,3 +84,21 @@ def test_stable_runs_and_driven_systems_are_not_judged_diverged():
     assert np.isnan(
         float(lj.simulate(damped, (1.0, 0.0), t1=5.0, dt=0.01).stats["energy_drift"])
     )
+
+
+@pytest.mark.parametrize("amplitude", [1.0, 1e10])
+def test_last_good_state_is_the_state_of_a_run_that_stops_there(amplitude):
+    # The loop takes every step and keeps the last good state beside the running
+    # one, two steps per loop trip for Störmer–Verlet; h = 1/32 makes every grid time
+    # exact. The two amplitudes overflow after 344 and 333 steps: both parities.
+    unstable = dict(t1=100.0, dt=1 / 32, solver=lj.StormerVerlet())
+    start = (jnp.asarray(amplitude), jnp.asarray(0.0))
+    failed = lj.simulate(STIFF, start, throw=False, **unstable)
+    steps = int(failed.stats["num_steps"])
+    assert failed.result == diffrax.RESULTS.nonfinite
+    # Finite, but judged diverged (its energy is ~1e300): not thrown, compared.
+    stopped = lj.simulate(STIFF, start, throw=False, **dict(unstable, t1=steps / 32))
+    assert stopped.result == diffrax.RESULTS.nonlinear_divergence
+    assert int(stopped.stats["num_steps"]) == steps
+    np.testing.assert_array_equal(np.asarray(failed.ys), np.asarray(stopped.ys))
+    np.testing.assert_array_equal(np.asarray(failed.ts), np.asarray(stopped.ts))
