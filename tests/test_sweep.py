@@ -7,6 +7,7 @@ import textwrap
 
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import lagjax as lj
 from tests.helpers import relative_close
@@ -43,6 +44,8 @@ SCRIPT = textwrap.dedent(
 )
 
 
+# A fresh process with four host devices: CI's second step (`bash tasks.sh integration`).
+@pytest.mark.integration
 def test_sharded_sweep_on_four_host_devices():
     env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4")
     env["JAX_PLATFORMS"] = "cpu"
@@ -63,7 +66,6 @@ def test_sweep_shares_args_and_validates_batch():
     q0s = jnp.array([0.5, 1.0, 1.5])
     traj = lj.sweep(system, (q0s, jnp.zeros(3)), args=2.0, t1=1.0, dt=0.01)
     assert np.allclose(traj.q[:, -1], q0s * np.cos(2.0), atol=1e-8)
-    import pytest
 
     with pytest.raises(ValueError, match="same leading size"):
         lj.sweep(system, (q0s, jnp.zeros(2)), t1=1.0, dt=0.01, args=2.0)
