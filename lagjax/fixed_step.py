@@ -77,9 +77,7 @@ def _attempt_step(terms, solver, times, y, solver_state, result, args, counts):
     )
 
 
-def step_function(
-    terms, solver, t0, dt, args, dtype, last_step=None, t1=None, until=None
-):
+def step_function(terms, solver, t0, dt, args, dtype, last_step, t1, until):
     """The scan body of one fixed step k → k + 1, carrying (y, state, result, k),
     that does not take a failed step or any step from index `until` on.
 
@@ -94,7 +92,7 @@ def step_function(
     def one_step(carry, _):
         y, solver_state, result, k = carry
         times = step_times(t0, dt, k, dtype, last_step, t1)
-        counts = jnp.asarray(True) if until is None else k < until
+        counts = k < until
         y_next, state_next, _, result = _attempt_step(
             terms, solver, times, y, solver_state, result, args, counts
         )
@@ -295,7 +293,7 @@ def integrate_fixed_steps_saving(
     `grid = (lead, every, saves)` from `uniform_grid_saves`: `lead` steps, a save,
     then `saves − 1` times `every` steps and a save. Two nested `lax.scan`s, so the
     saving costs one copy per save and nothing per step. `saved[j]` is False for
-    the saves a failure (see `step_function`) kept from being reached.
+    the saves a failure (see `tracking_step_function`) kept from being reached.
     """
     lead, every, saves = grid
     one_step = tracking_step_function(terms, solver, t0, dt, args, dtype)
