@@ -16,17 +16,13 @@ objects, so results match `diffeqsolve` with `ConstantStepSize` to round-off whe
 the span is a whole number of steps; otherwise the scans shorten the last step
 where diffrax spreads the span over equal steps.
 
-Two step bodies: `tracking_step_function` takes every step and keeps the last good
-state beside the running one (failures are detected cheaply, acted on after the
-loop), so nothing on the path from one step to the next splits XLA's fused step;
-`step_function` refuses to take a failed step or one past a bound, for the
-off-grid saves whose inner scans have a fixed length.
+The scan bodies and what they carry are in `step_bodies.py`.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Any, NamedTuple
+from typing import Any
 
 import diffrax
 import equinox as eqx
@@ -34,7 +30,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .solvers.splitting import AbstractSplittingSolver
+from .step_bodies import (
+    TrackingCarry,
+    initial_tracking_carry,
+    tracking_scan,
+    tracking_step_function,
+)
 
 
 def fixed_step_count(t0: float, t1: float, dt: float) -> int:
@@ -48,179 +49,6 @@ def fixed_step_count(t0: float, t1: float, dt: float) -> int:
     if nearest >= 1 and abs(ratio - nearest) <= 1e-9 * ratio:
         return nearest
     return max(1, math.ceil(ratio))
-
-
-def _attempt_step(terms, solver, times, y, solver_state, result, args, counts):
-    """One step from `y` and the run's result after it: `(y_next, state_next,
-    dense_info, result)`.
-
-    A failure — the solver's own `RESULTS`, or a non-finite state
-    (`RESULTS.nonfinite`: one sum of the state, inside the fused step) — is
-    recorded in `result` when `counts` and the run had not failed before; the
-    first failure is the one kept.
-    """
-    start, end = times
-    y_next, _, dense_info, state_next, step_result = solver.step(
-        terms, start, end, y, args, solver_state, False
-    )
-    step_result = diffrax.RESULTS.where(
-        all_finite(y_next),
-        step_result,
-        diffrax.RESULTS.nonfinite,  # pyright: ignore[reportArgumentType]
-    )
-    counts = counts & (result == diffrax.RESULTS.successful)
-    return (
-        y_next,
-        state_next,
-        dense_info,
-        diffrax.RESULTS.where(counts, step_result, result),
-    )
-
-
-def step_function(terms, solver, t0, dt, args, dtype, last_step, t1, until):
-    """The scan body of one fixed step k → k + 1, carrying (y, state, result, k),
-    that does not take a failed step or any step from index `until` on.
-
-    A step not taken leaves the state, the solver's state (e.g. a compensated
-    sum's error term) and the step index as they were, so a scan of fixed length
-    can take a varying number of steps (`off_grid_saves`), and a failed run stops
-    at its last good step. Those selects sit on the path from one step to the
-    next and split XLA's fused step: the runs that need neither use
-    `tracking_step_function`. Times are those of `step_times`.
-    """
-
-    def one_step(carry, _):
-        y, solver_state, result, k = carry
-        times = step_times(t0, dt, k, dtype, last_step, t1)
-        counts = k < until
-        y_next, state_next, _, result = _attempt_step(
-            terms, solver, times, y, solver_state, result, args, counts
-        )
-        stay = (result != diffrax.RESULTS.successful) | ~counts
-        y, solver_state = jax.tree_util.tree_map(
-            lambda new, old: jnp.where(stay, old, new),
-            (y_next, state_next),
-            (y, solver_state),
-        )
-        return (y, solver_state, result, jnp.where(stay, k, k + 1)), None
-
-    return one_step
-
-
-class TrackingCarry(NamedTuple):
-    """What a scan of `tracking_step_function` carries from step to step."""
-
-    y: Any  # the state the next step starts from (poisoned after a failure)
-    solver_state: Any
-    result: Any  # the first failure, or successful
-    k: Any  # steps computed
-    last_good: Any  # the state after the last step that did not fail
-    taken: Any  # steps up to and including that one
-
-
-def tracking_step_function(
-    terms, solver, t0, dt, args, dtype, last_step=None, t1=None, emit=None
-):
-    """The scan body of one fixed step k → k + 1 over a `TrackingCarry`.
-
-    Detect cheaply, diagnose late: every step is taken, a failure only recorded
-    in `result`, and the state runs on (poisoned) after it; beside it the carry
-    keeps the last good state and the number of steps that reached it. Those
-    selects are off the path from one step to the next, so XLA keeps the step
-    one fused kernel: Kepler with compensated Störmer–Verlet 30 → 25 ns per step
-    (`benchmarks/solver_overhead.py`), with bit-identical results. So a failed
-    run still returns what it computed up to the failure and where it stopped.
-
-    Times are formed from the step index (t0 + k·dt), not accumulated, so every
-    step has the same h to the last bit on an exact grid (`step_grid`). The step
-    index is carried, not scanned over: with `xs = arange(steps)` XLA on CPU
-    launched the fused pieces of a larger step body one by one (measured 10× on
-    Kepler with Yoshida4, 2× on a rigid body; bit-identical results). When
-    `last_step` is given, that step ends exactly at `t1` (a shortened last step).
-
-    `emit(y, dense_info)`, when given, is what the scan outputs per step (the
-    last good state for `SaveAt(steps=True)`, the dense information for dense
-    output).
-    """
-
-    def one_step(carry: TrackingCarry, _):
-        times = step_times(t0, dt, carry.k, dtype, last_step, t1)
-        y_next, state_next, dense_info, result = _attempt_step(
-            terms, solver, times, carry.y, carry.solver_state, carry.result, args,
-            jnp.asarray(True),
-        )  # fmt: skip
-        good = result == diffrax.RESULTS.successful
-        last_good = jax.tree_util.tree_map(
-            lambda new, old: jnp.where(good, new, old), y_next, carry.last_good
-        )
-        taken = jnp.where(good, carry.k + 1, carry.taken)
-        new = TrackingCarry(y_next, state_next, result, carry.k + 1, last_good, taken)
-        return new, None if emit is None else emit(last_good, dense_info)
-
-    return one_step
-
-
-def tracking_scan(
-    one_step, carry: TrackingCarry, length: int, solver: diffrax.AbstractSolver
-):
-    """`lax.scan` of a `tracking_step_function` body, `steps_per_trip(solver)`
-    steps per loop iteration (the arithmetic of each step is unchanged)."""
-    unroll = steps_per_trip(solver)
-    return jax.lax.scan(one_step, carry, None, length=length, unroll=unroll)
-
-
-# Splittings with up to this many force evaluations per step run two steps per
-# loop iteration (see `steps_per_trip`).
-UNROLLED_SPLITTING_STAGES = 6
-
-
-def steps_per_trip(solver: diffrax.AbstractSolver) -> int:
-    """How many steps one iteration of the fixed-step loop takes: 2 for the short
-    explicit splittings, 1 otherwise.
-
-    Unrolled by two, XLA fuses across the step boundary and the loop's own cost is
-    paid half as often: Kepler with compensated Störmer–Verlet 25 → 20 ns per step,
-    Yoshida4 59 → 53 (`benchmarks/solver_overhead.py`). For longer steps (an
-    eighth-order composition, an implicit stage solve, a Lie–Poisson step of
-    nested scans) the loop's cost is a small part of the step and unrolling
-    measured no gain, while it doubles the compiled loop body (compile time of the
-    splitting, implicit and rigid-body test files +10 %).
-    """
-    # A wrapper (the Hermite extension, a projection) steps like what it wraps;
-    # diffrax's wrappers also pass `isinstance` checks for it, hence the unwrapping.
-    while isinstance(solver, diffrax.AbstractWrappedSolver):
-        solver = solver.solver
-    if isinstance(solver, AbstractSplittingSolver):
-        stages = len(solver.drift_coefficients)
-        return 2 if stages <= UNROLLED_SPLITTING_STAGES else 1
-    return 1
-
-
-def step_times(t0, dt, k, dtype, last_step=None, t1=None) -> tuple[Any, Any]:
-    """(t_k, t_{k+1}) of step k in `dtype`: t0 + k·dt, the last step ending at t1."""
-    start = (t0 + k * dt).astype(dtype)
-    end = t0 + (k + 1) * dt
-    if last_step is not None:
-        end = jnp.where(k == last_step, t1, end)  # pyright: ignore[reportArgumentType]
-    return start, end.astype(dtype)
-
-
-def all_finite(state: Any) -> jax.Array:
-    """Whether every entry of `state` is finite: one sum (inf and NaN propagate)."""
-    total = sum(jnp.sum(leaf) for leaf in jax.tree_util.tree_leaves(state))
-    return jnp.isfinite(total)
-
-
-def initial_carry(terms, solver, t0, dt, y0, args, dtype):
-    state = solver.init(
-        terms, jnp.asarray(t0, dtype), jnp.asarray(t0 + dt, dtype), y0, args
-    )
-    return (y0, state, diffrax.RESULTS.successful, jnp.asarray(0))
-
-
-def initial_tracking_carry(terms, solver, t0, dt, y0, args, dtype) -> TrackingCarry:
-    y0, state, result, k = initial_carry(terms, solver, t0, dt, y0, args, dtype)
-    return TrackingCarry(y0, state, result, k, y0, k)
 
 
 # Compiled once per (terms, solver, times, state structure): terms and solvers are

@@ -10,7 +10,7 @@ to round-off.
 The run is one `lax.scan` over the saves. Save j first takes the plain steps up
 to its bracket — $e_j = k_j - k_{j-1} - 1$ of them, by an inner scan of fixed
 length $\max_j e_j$ whose surplus steps are computed and not taken (the selects
-of `fixed_step.step_function`) — then the bracket step itself with the dense
+of `step_bodies.step_function`) — then the bracket step itself with the dense
 information, and evaluates the interpolant. A save in the step the previous one
 bracketed ($e_j = -1$) reuses that step's dense information. Only bracket steps
 evaluate the vector field for the extension (two evaluations per save, four with
@@ -35,14 +35,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .fixed_step import (
-    all_finite,
-    fixed_step_count,
-    initial_carry,
-    step_function,
-    step_times,
-)
+from .fixed_step import fixed_step_count
 from .hermite import HermiteDenseOutput
+from .step_bodies import all_finite, initial_carry, step_function, step_times
 
 # Most steps computed per step needed (plain and bracket steps together) before a
 # schedule is left to diffeqsolve.

@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import pytest
 
 import lagjax as lj
-from lagjax.fixed_step import steps_per_trip
+from lagjax.step_bodies import steps_per_trip
 
 GRAVITY = 9.81
 
