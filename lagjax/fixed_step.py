@@ -16,7 +16,10 @@ objects, so results match `diffeqsolve` with `ConstantStepSize` to round-off whe
 the span is a whole number of steps; otherwise the scans shorten the last step
 where diffrax spreads the span over equal steps.
 
-The scan bodies and what they carry are in `step_bodies.py`.
+The scan bodies and what they carry are in `step_bodies.py`. Runs of
+`BLOCKED_MIN_STEPS` or more (final state, or saved on the grid) take blocks of
+untracked steps and locate a failure after the loop (`blocked_loop.py`): the same
+results, and under `vmap` the step stays as lean as a hand-written one.
 """
 
 from __future__ import annotations
@@ -30,9 +33,19 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .blocked_loop import (
+    BLOCKED_MIN_STEPS,
+    BlockCarry,
+    blocked_scan,
+    fast_block,
+    locate_failure,
+    start_blocks,
+)
 from .step_bodies import (
     TrackingCarry,
+    fast_step_function,
     initial_tracking_carry,
+    steps_per_trip,
     tracking_scan,
     tracking_step_function,
 )
@@ -76,7 +89,13 @@ def integrate_fixed_steps(
     dt = math.copysign(abs(dt), t1 - t0)
     one_step = tracking_step_function(terms, solver, t0, dt, args, dtype, steps - 1, t1)
     initial = initial_tracking_carry(terms, solver, t0, dt, y0, args, dtype)
-    final, _ = tracking_scan(one_step, initial, steps, solver)
+    if steps < BLOCKED_MIN_STEPS:
+        final, _ = tracking_scan(one_step, initial, steps, solver)
+    else:
+        fast_step = fast_step_function(
+            terms, solver, t0, dt, args, dtype, steps - 1, t1
+        )
+        final = blocked_scan(fast_step, one_step, initial, steps, solver)
     return final.last_good, final.result, final.taken
 
 
@@ -120,12 +139,28 @@ def integrate_fixed_steps_saving(
 
     `grid = (lead, every, saves)` from `uniform_grid_saves`: `lead` steps, a save,
     then `saves − 1` times `every` steps and a save. Two nested `lax.scan`s, so the
-    saving costs one copy per save and nothing per step. `saved[j]` is False for
-    the saves a failure (see `tracking_step_function`) kept from being reached.
+    saving costs one copy per save and nothing per step (a long run's intervals
+    are its blocks, `blocked_loop.py`). `saved[j]` is False for the saves a
+    failure kept from being reached; those hold the last good state.
     """
     lead, every, saves = grid
+    initial = initial_tracking_carry(terms, solver, t0, dt, y0, args, dtype)
     one_step = tracking_step_function(terms, solver, t0, dt, args, dtype)
-    carry = initial_tracking_carry(terms, solver, t0, dt, y0, args, dtype)
+    if lead + every * (saves - 1) < BLOCKED_MIN_STEPS:
+        return _saving_tracked(one_step, initial, grid, solver)
+    fast_step = fast_step_function(terms, solver, t0, dt, args, dtype)
+    return _saving_blocked(fast_step, one_step, initial, grid, solver)
+
+
+def _saved_states(first, later):
+    """Saves from the one before the loop and those the loop's scan emitted."""
+    return jax.tree_util.tree_map(
+        lambda a, b: jnp.concatenate([jnp.asarray(a)[None], b]), first, later
+    )
+
+
+def _saving_tracked(one_step, carry: TrackingCarry, grid, solver):
+    lead, every, saves = grid
     if lead:
         carry, _ = tracking_scan(one_step, carry, lead, solver)
 
@@ -138,10 +173,38 @@ def integrate_fixed_steps_saving(
 
     first = save(carry)
     carry, later = jax.lax.scan(interval, carry, None, length=saves - 1)
-    ys, saved = jax.tree_util.tree_map(
-        lambda a, b: jnp.concatenate([jnp.asarray(a)[None], b]), first, later
-    )
+    ys, saved = _saved_states(first, later)
     return ys, carry.result, carry.taken, saved
+
+
+def _saving_blocked(fast_step, one_step, initial: TrackingCarry, grid, solver):
+    """The saving loop in blocks (`blocked_loop.py`): the intervals between saves
+    are the blocks. A save at or after a failure holds the last good state, which
+    is known only once the failure is located after the loop."""
+    lead, every, saves = grid
+    carry = start_blocks(initial)
+    if lead:
+        carry = fast_block(fast_step, carry, lead, unroll=1)
+
+    def save(carry: BlockCarry):
+        return carry.steps.last_good, carry.steps.result == diffrax.RESULTS.successful
+
+    def interval(carry, _):
+        carry = fast_block(fast_step, carry, every, steps_per_trip(solver))
+        return carry, save(carry)
+
+    first = save(carry)
+    carry, later = jax.lax.scan(interval, carry, None, length=saves - 1)
+    final = locate_failure(one_step, carry, max(lead, every))
+    ys, saved = _saved_states(first, later)
+    ys = jax.tree_util.tree_map(
+        lambda saved_y, last: jnp.where(
+            saved.reshape(saved.shape + (1,) * (saved_y.ndim - 1)), saved_y, last
+        ),
+        ys,
+        final.last_good,
+    )
+    return ys, final.result, final.taken, saved
 
 
 @eqx.filter_jit

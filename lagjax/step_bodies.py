@@ -1,11 +1,14 @@
 """The bodies of the fixed-step loop: one step k → k + 1 of a diffrax solver as a
 `lax.scan` body, and what the loop carries.
 
-Two bodies, for two needs. `tracking_step_function` takes every step and keeps
+Three bodies, for three needs. `tracking_step_function` takes every step and keeps
 the last good state beside the running one (failures are detected cheaply, acted
 on after the loop), so nothing on the path from one step to the next splits XLA's
-fused step. `step_function` refuses to take a failed step or one past a bound, for
-the off-grid saves whose inner scans have a fixed length.
+fused step. `fast_step_function` keeps nothing but the state, the solver's state,
+its first reported failure and the step index: the blocked loop (`blocked_loop.py`)
+tests a whole block of its steps at once and searches a failed block again with
+the tracking body. `step_function` refuses to take a failed step or one past a
+bound, for the off-grid saves whose inner scans have a fixed length.
 Times are formed from the step index (`step_times`), never accumulated.
 """
 
@@ -126,6 +129,34 @@ def tracking_step_function(
         taken = jnp.where(good, carry.k + 1, carry.taken)
         new = TrackingCarry(y_next, state_next, result, carry.k + 1, last_good, taken)
         return new, None if emit is None else emit(last_good, dense_info)
+
+    return one_step
+
+
+def fast_step_function(terms, solver, t0, dt, args, dtype, last_step=None, t1=None):
+    """The scan body of one fixed step k → k + 1 over a `TrackingCarry` that
+    updates only `y`, `solver_state`, `result` and `k`.
+
+    No finiteness test and no last good state: under `vmap` the step is
+    throughput-bound and those cost in proportion to it (compensated
+    Störmer–Verlet on Kepler ×64: 1.45× a hand-written scan with them per step,
+    1.07× without). `result` keeps the solver's first reported failure (a constant
+    for the explicit splittings, which XLA folds away). The blocked loop tests the
+    state once per block and leaves `last_good` and `taken` to its block ends.
+    """
+
+    def one_step(carry: TrackingCarry, _):
+        start, end = step_times(t0, dt, carry.k, dtype, last_step, t1)
+        y_next, _, _, state_next, step_result = solver.step(
+            terms, start, end, carry.y, args, carry.solver_state, False
+        )
+        result = diffrax.RESULTS.where(
+            carry.result == diffrax.RESULTS.successful, step_result, carry.result
+        )
+        new = carry._replace(
+            y=y_next, solver_state=state_next, result=result, k=carry.k + 1
+        )
+        return new, None
 
     return one_step
 

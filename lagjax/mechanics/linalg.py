@@ -31,6 +31,8 @@ import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 import numpy as np
 
+from ..batch_branch import any_in_batch
+
 UNROLLED_SOLVE_LIMIT = 3
 
 # A matrix counts as singular when its normalised determinant (for unrolled solves)
@@ -112,19 +114,6 @@ def solve_dense(m: jax.Array, rhs: jax.Array) -> tuple[jax.Array, jax.Array]:
     return jsl.lu_solve((lu, pivots), rhs), singular
 
 
-@jax.custom_batching.custom_vmap
-def _any_in_batch(flag: jax.Array) -> jax.Array:
-    """`flag` itself; under `vmap`, whether it is true for any batch member (one
-    unbatched boolean), so that a `lax.cond` on it stays a branch, not a select."""
-    return flag
-
-
-@_any_in_batch.def_vmap
-def _any_in_batch_rule(axis_size, in_batched, flag):
-    del axis_size
-    return (jnp.any(flag) if in_batched[0] else flag), False
-
-
 class _SymmetricFactors(NamedTuple):
     fallback: jax.Array  # LU was formed (for some member, under vmap)
     sound: jax.Array  # this member's Cholesky factor is used
@@ -160,7 +149,7 @@ def _factor_symmetric(m: jax.Array) -> _SymmetricFactors:
         pivots = jnp.zeros(m.shape[:-1], dtype=np.int32)
         return cholesky, jnp.zeros_like(m), pivots, jnp.zeros((), dtype=bool)
 
-    fallback = _any_in_batch(~sound)
+    fallback = any_in_batch(~sound)
     return _SymmetricFactors(
         fallback, sound, *jax.lax.cond(fallback, with_lu, without_lu)
     )
@@ -210,7 +199,7 @@ def solve_symmetric(m: jax.Array, rhs: jax.Array) -> tuple[jax.Array, jax.Array]
     def without_lu():
         return jsl.cho_solve((cholesky, True), rhs), jnp.zeros((), dtype=bool)
 
-    return jax.lax.cond(_any_in_batch(~sound), with_lu, without_lu)
+    return jax.lax.cond(any_in_batch(~sound), with_lu, without_lu)
 
 
 @solve_symmetric.defjvp
@@ -298,7 +287,7 @@ def solve_unrolled_symmetric(
     def without_lu():
         return by_ldl, jnp.zeros((), dtype=bool)
 
-    return jax.lax.cond(_any_in_batch(~sound), with_lu, without_lu)
+    return jax.lax.cond(any_in_batch(~sound), with_lu, without_lu)
 
 
 def singular_message_for(what: str) -> str:
