@@ -23,7 +23,8 @@ coefficient tables, so one engine (`AbstractSplittingSolver`) runs them all:
 
 Within a step the updates are accumulated as small increments Δq, Δp and added
 to the state once, with Kahan's compensated summation
-(`lagjax.solvers.compensated`). The stage positions and momenta at which the
+(`lagjax.solvers.compensated`); with `compensated=False` the state is updated in
+place, stage by stage, exactly as a hand-written loop does. The stage positions and momenta at which the
 forces and velocities are evaluated are advanced in place, as a hand-written loop
 does (one add per drift or kick on the path from one force to the next); the
 increments are summed alongside, off that path. Both round to the state's last
@@ -52,7 +53,7 @@ from diffrax import (
     LocalLinearInterpolation,
 )
 
-from lagjax.solvers.compensated import add_to_state, zero_compensation
+from lagjax.solvers.compensated import compensated_add, zero_compensation
 from lagjax.solvers.splitting_tables import (
     BLANES_MOAN4_DRIFTS,
     BLANES_MOAN4_KICKS,
@@ -145,27 +146,40 @@ class AbstractSplittingSolver(AbstractSolver[_SplittingState]):
         if made_jump is not False:
             # After a jump the stored force belongs to the old vector field.
             force = lax.cond(made_jump, lambda: term_p.vf(t0, q0, args), lambda: force)
-        delta_q, delta_p = self._all_but_last_kick(terms, t0, t1, y0, args, force)
-
-        # The increments stay small, so they keep their low-order bits; they meet
-        # the (large) state once per step, through the compensated sum.
-        compensation_q, compensation_p = compensation or (None, None)
-        q1, compensation_q = add_to_state(q0, delta_q, compensation_q)
-        # The last kick is evaluated at the stored new position, so it doubles as
-        # the first kick of the next step (first-same-as-last).
-        force = term_p.vf(t1, q1, args)
+        stage, increments = self._all_but_last_kick(terms, t0, t1, y0, args, force)
         last_kick = _scaled(term_p.contr(t0, t1), self.kick_coefficients[-1])
-        delta_p = _add(delta_p, term_p.prod(force, last_kick))
-        p1, compensation_p = add_to_state(p0, delta_p, compensation_p)
-
-        if compensation is not None:
+        # The last kick is evaluated at the new position, so it doubles as the
+        # first kick of the next step (first-same-as-last).
+        if compensation is None:
+            # The stage point is the new state, updated in place as a hand-written
+            # loop does (the same arithmetic). Adding summed increments instead
+            # would keep each force alive to the end of the step, and XLA
+            # recomputes such a value in every fused kernel that reads it (a
+            # division per force: 1.4x a hand-written loop under vmap).
+            q1, p_before_last_kick = stage
+            force = term_p.vf(t1, q1, args)
+            p1 = _add(p_before_last_kick, term_p.prod(force, last_kick))
+        else:
+            # The increments stay small, so they keep their low-order bits; they
+            # meet the (large) state once per step, through the compensated sum.
+            (delta_q, delta_p), (compensation_q, compensation_p) = (
+                increments,
+                compensation,
+            )
+            q1, compensation_q = compensated_add(q0, delta_q, compensation_q)
+            force = term_p.vf(t1, q1, args)
+            delta_p = _add(delta_p, term_p.prod(force, last_kick))
+            p1, compensation_p = compensated_add(p0, delta_p, compensation_p)
             compensation = (compensation_q, compensation_p)
         y1 = (q1, p1)
         dense_info = dict(y0=y0, y1=y1)
         return y1, None, dense_info, (compensation, force), RESULTS.successful
 
-    def _all_but_last_kick(self, terms, t0, t1, y0, args, force) -> tuple[Any, Any]:
-        """Increments (Δq, Δp) of every drift and every kick but the last.
+    def _all_but_last_kick(
+        self, terms, t0, t1, y0, args, force
+    ) -> tuple[tuple[Any, Any], tuple[Any, Any]]:
+        """`((q, p), (Δq, Δp))` after every drift and every kick but the last: the
+        stage point reached and the increments summed on the way.
 
         `force` is the kick vector field at (t0, q0).
         """
@@ -192,7 +206,7 @@ class AbstractSplittingSolver(AbstractSolver[_SplittingState]):
                 dp = term_p.prod(force, _scaled(control_p, kicks[index + 1]))
                 delta_p = _add(delta_p, dp)
                 p_now = _add(p_now, dp)
-        return delta_q, delta_p
+        return (q_now, p_now), (delta_q, delta_p)
 
     def func(self, terms, t0, y0, args):
         term_q, term_p = terms
