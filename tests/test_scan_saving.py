@@ -131,12 +131,15 @@ def test_a_failure_keeps_the_saves_before_it():
     options = dict(t1=100.0, dt=0.03, solver=lj.StormerVerlet(), throw=False)
     off_grid = lj.simulate(stiff, START, ts=jnp.linspace(0.01, 99.0, 50), **options)
     steps = lj.simulate(stiff, START, saveat=diffrax.SaveAt(steps=True), **options)
+    final = lj.simulate(stiff, START, **options)
     for run in (off_grid, steps):
         assert run.result == diffrax.RESULTS.nonfinite
         kept = np.isfinite(np.asarray(run.ts))
         assert 0 < kept.sum() < kept.size
         assert not kept[np.argmin(kept) :].any()  # the saves before the failure
         assert np.all(np.isfinite(np.asarray(run.q)[kept]))
+        # Every path stops at the same step: the last one before the overflow.
+        assert int(run.stats["num_steps"]) == int(final.stats["num_steps"]) > 0
 
 
 def test_which_requests_the_scan_takes():
