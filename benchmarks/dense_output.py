@@ -40,6 +40,14 @@ gap to the twin is the step itself: lagjax's final-state scan alone takes
 2.1–2.3 ms against the twin's 1.6 ms for stepping and stacking every state
 (1.8–2.0 ms with `Yoshida4(compensated=False)`).
 
+Re-measured 2026-11-26 (`--steps 20000 --repeats 9 --clock cpu`, medians, the
+code before and after this session's changes alternated in the same session):
+ts off the grid Kepler 1.30–1.39, pendulum 1.31–1.36 (unchanged: taking the
+plain steps between saves with the tracking body instead of the refusing one
+measured no gain, and was not kept); SaveAt(steps=True), whose loop now emits the
+running state and masks the entries from a failure on after the loop, Kepler
+1.16–1.21 (1.29–1.34 before), pendulum 1.08–1.19 (1.13–1.16).
+
     python -m benchmarks.dense_output [--steps N] [--repeats R] [--clock cpu]
 """
 

@@ -240,4 +240,15 @@ def integrate_every_step(
     initial = initial_tracking_carry(terms, solver, t0, dt, y0, args, dtype)
     final, kept = tracking_scan(one_step, initial, steps, solver)
     ys, infos = kept  # pyright: ignore[reportGeneralTypeIssues]
+    if states:
+        # Emitting the running state keeps the selects of the last good state
+        # off the stacked output; the entries from the failure on are masked here.
+        result_of_step = jnp.arange(1, steps + 1) <= final.taken
+        ys = jax.tree_util.tree_map(
+            lambda saved, last: jnp.where(
+                result_of_step.reshape((-1,) + (1,) * (saved.ndim - 1)), saved, last
+            ),
+            ys,
+            final.last_good,
+        )
     return final.last_good, ys, infos, final.result, final.taken

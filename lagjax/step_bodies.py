@@ -111,9 +111,10 @@ def tracking_step_function(
     Kepler with Yoshida4, 2× on a rigid body; bit-identical results). When
     `last_step` is given, that step ends exactly at `t1` (a shortened last step).
 
-    `emit(y, dense_info)`, when given, is what the scan outputs per step (the
-    last good state for `SaveAt(steps=True)`, the dense information for dense
-    output).
+    `emit(y, dense_info)`, when given, is what the scan outputs per step from the
+    step's new state (the state for `SaveAt(steps=True)`, the dense information
+    for dense output); entries from a failed step on are the caller's to mask,
+    with `taken`.
     """
 
     def one_step(carry: TrackingCarry, _):
@@ -128,7 +129,7 @@ def tracking_step_function(
         )
         taken = jnp.where(good, carry.k + 1, carry.taken)
         new = TrackingCarry(y_next, state_next, result, carry.k + 1, last_good, taken)
-        return new, None if emit is None else emit(last_good, dense_info)
+        return new, None if emit is None else emit(y_next, dense_info)
 
     return one_step
 

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import lagjax as lj
+from lagjax.fixed_step import integrate_every_step
 
 STIFF = lj.SeparableHamiltonian(lambda p: 0.5 * p**2, lambda q: 5e3 * q**2)
 START = (jnp.asarray(1.0), jnp.asarray(0.0))
@@ -102,3 +103,23 @@ def test_last_good_state_is_the_state_of_a_run_that_stops_there(amplitude):
     assert int(stopped.stats["num_steps"]) == steps
     np.testing.assert_array_equal(np.asarray(failed.ys), np.asarray(stopped.ys))
     np.testing.assert_array_equal(np.asarray(failed.ts), np.asarray(stopped.ts))
+
+
+def test_every_step_outputs_repeat_the_last_good_state_after_a_failure():
+    # SaveAt(steps=True)'s loop emits the running state; from the failing step on
+    # the entries are the last good state (what `steps_taken` counts up to).
+    terms = (
+        diffrax.ODETerm(lambda t, p, args: p),
+        diffrax.ODETerm(lambda t, q, args: -1e4 * q),
+    )
+    y0 = (jnp.asarray(1.0), jnp.asarray(0.0))
+    last, (qs, ps), _, result, taken = integrate_every_step(
+        terms, lj.StormerVerlet(), 0.0, 20.0, 1 / 32, y0, None
+    )
+    taken = int(taken)
+    assert result == diffrax.RESULTS.nonfinite and 0 < taken < 640
+    qs, ps = np.asarray(qs), np.asarray(ps)
+    assert np.all(np.isfinite(qs)) and np.all(np.isfinite(ps))
+    np.testing.assert_array_equal(qs[taken - 1 :], float(last[0]))
+    np.testing.assert_array_equal(ps[taken - 1 :], float(last[1]))
+    assert qs[taken - 2] != qs[taken - 1]
