@@ -16,7 +16,11 @@ import numpy as np
 import pytest
 
 from lagjax.blocked_loop import BLOCKED_MIN_STEPS, block_length
-from lagjax.fixed_step import integrate_fixed_steps, integrate_fixed_steps_saving
+from lagjax.fixed_step import (
+    integrate_every_step,
+    integrate_fixed_steps,
+    integrate_fixed_steps_saving,
+)
 from lagjax.solvers.splitting import StormerVerlet
 from lagjax.step_bodies import (
     initial_tracking_carry,
@@ -106,13 +110,11 @@ def test_saved_states_after_a_failure_hold_the_last_good_state():
         return integrate_fixed_steps_saving(TERMS, solver, 0.0, DT, grid, y0, k)
 
     def every_state(y0, k):
-        # The tracked loop emitting its last good state after each step.
-        one_step = tracking_step_function(
-            TERMS, solver, 0.0, DT, k, float, emit=lambda y, _: y
+        # The tracked loop keeping every step (the last good state from a failure on).
+        _, (qs, _), _, result, taken = integrate_every_step(
+            TERMS, solver, 0.0, steps * DT, DT, y0, k
         )
-        initial = initial_tracking_carry(TERMS, solver, 0.0, DT, y0, k, float)
-        final, (qs, _) = tracking_scan(one_step, initial, steps, solver)
-        return jnp.concatenate([y0[0][None], qs]), final.taken, final.result
+        return jnp.concatenate([y0[0][None], qs]), taken, result
 
     (qs, _), result, taken, saved = jax.jit(jax.vmap(saving))(y0, k)
     q_ref, taken_ref, result_ref = jax.jit(jax.vmap(every_state))(y0, k)
