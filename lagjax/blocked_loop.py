@@ -30,7 +30,13 @@ import jax
 import jax.numpy as jnp
 
 from .batch_branch import any_in_batch
-from .step_bodies import TrackingCarry, all_finite, steps_per_trip
+from .step_bodies import (
+    TrackingCarry,
+    all_finite,
+    first_failure,
+    steps_per_trip,
+    tree_select,
+)
 
 # Steps per block. The verdict at a block's end costs about one tracked step, so
 # it is 0.4 % of a block's work; a failure is searched again over one block.
@@ -75,15 +81,13 @@ def fast_block(
     )
     good = was_good & (verdict == diffrax.RESULTS.successful)
 
-    def moved(new, old):
-        return jax.tree_util.tree_map(lambda a, b: jnp.where(good, a, b), new, old)
-
     steps = steps._replace(
-        result=diffrax.RESULTS.where(was_good, verdict, carry.steps.result),
-        last_good=moved(steps.y, carry.steps.last_good),
+        result=first_failure(carry.steps.result, verdict),
+        last_good=tree_select(good, steps.y, carry.steps.last_good),
         taken=jnp.where(good, steps.k, carry.steps.taken),
     )
-    return BlockCarry(steps, moved(steps.solver_state, carry.good_solver_state))
+    good_solver_state = tree_select(good, steps.solver_state, carry.good_solver_state)
+    return BlockCarry(steps, good_solver_state)
 
 
 def blocked_scan(
@@ -140,14 +144,9 @@ def locate_failure(one_tracked_step, carry: BlockCarry, length: int) -> Tracking
         # Steps past the failed block cannot matter: the first failure is kept.
         located = failed & (found.result != diffrax.RESULTS.successful)
 
-        def where_located(new, old):
-            return jax.tree_util.tree_map(
-                lambda a, b: jnp.where(located, a, b), new, old
-            )
-
         return steps._replace(
             result=diffrax.RESULTS.where(located, found.result, steps.result),
-            last_good=where_located(found.last_good, steps.last_good),
+            last_good=tree_select(located, found.last_good, steps.last_good),
             taken=jnp.where(located, found.taken, steps.taken),
         )
 

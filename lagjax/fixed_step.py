@@ -159,6 +159,17 @@ def _saved_states(first, later):
     )
 
 
+def _holding(reached: jax.Array, ys: Any, held: Any) -> Any:
+    """`ys` (stacked along the first axis) where `reached`, else the state `held`."""
+    return jax.tree_util.tree_map(
+        lambda y, last: jnp.where(
+            reached.reshape(reached.shape + (1,) * (y.ndim - 1)), y, last
+        ),
+        ys,
+        held,
+    )
+
+
 def _saving_tracked(one_step, carry: TrackingCarry, grid, solver):
     lead, every, saves = grid
     if lead:
@@ -197,14 +208,7 @@ def _saving_blocked(fast_step, one_step, initial: TrackingCarry, grid, solver):
     carry, later = jax.lax.scan(interval, carry, None, length=saves - 1)
     final = locate_failure(one_step, carry, max(lead, every))
     ys, saved = _saved_states(first, later)
-    ys = jax.tree_util.tree_map(
-        lambda saved_y, last: jnp.where(
-            saved.reshape(saved.shape + (1,) * (saved_y.ndim - 1)), saved_y, last
-        ),
-        ys,
-        final.last_good,
-    )
-    return ys, final.result, final.taken, saved
+    return _holding(saved, ys, final.last_good), final.result, final.taken, saved
 
 
 @eqx.filter_jit
@@ -243,12 +247,5 @@ def integrate_every_step(
     if states:
         # Emitting the running state keeps the selects of the last good state
         # off the stacked output; the entries from the failure on are masked here.
-        result_of_step = jnp.arange(1, steps + 1) <= final.taken
-        ys = jax.tree_util.tree_map(
-            lambda saved, last: jnp.where(
-                result_of_step.reshape((-1,) + (1,) * (saved.ndim - 1)), saved, last
-            ),
-            ys,
-            final.last_good,
-        )
+        ys = _holding(jnp.arange(1, steps + 1) <= final.taken, ys, final.last_good)
     return final.last_good, ys, infos, final.result, final.taken

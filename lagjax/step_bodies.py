@@ -23,6 +23,18 @@ import jax.numpy as jnp
 from .solvers.splitting import AbstractSplittingSolver
 
 
+def tree_select(flag: Any, new: Any, old: Any) -> Any:
+    """`new` where `flag`, else `old`, leaf by leaf (`flag` a scalar per member)."""
+    return jax.tree_util.tree_map(lambda a, b: jnp.where(flag, a, b), new, old)
+
+
+def first_failure(result: Any, new_result: Any) -> Any:
+    """The run's result after one more outcome: the first failure is kept."""
+    return diffrax.RESULTS.where(
+        result == diffrax.RESULTS.successful, new_result, result
+    )
+
+
 def _attempt_step(terms, solver, times, y, solver_state, result, args, counts):
     """One step from `y` and the run's result after it: `(y_next, state_next,
     dense_info, result)`.
@@ -41,13 +53,9 @@ def _attempt_step(terms, solver, times, y, solver_state, result, args, counts):
         step_result,
         diffrax.RESULTS.nonfinite,  # pyright: ignore[reportArgumentType]
     )
-    counts = counts & (result == diffrax.RESULTS.successful)
-    return (
-        y_next,
-        state_next,
-        dense_info,
-        diffrax.RESULTS.where(counts, step_result, result),
-    )
+    # A step that does not count cannot fail the run.
+    step_result = diffrax.RESULTS.where(counts, step_result, result)
+    return y_next, state_next, dense_info, first_failure(result, step_result)
 
 
 def step_function(terms, solver, t0, dt, args, dtype, last_step, t1, until):
@@ -70,11 +78,7 @@ def step_function(terms, solver, t0, dt, args, dtype, last_step, t1, until):
             terms, solver, times, y, solver_state, result, args, counts
         )
         stay = (result != diffrax.RESULTS.successful) | ~counts
-        y, solver_state = jax.tree_util.tree_map(
-            lambda new, old: jnp.where(stay, old, new),
-            (y_next, state_next),
-            (y, solver_state),
-        )
+        y, solver_state = tree_select(stay, (y, solver_state), (y_next, state_next))
         return (y, solver_state, result, jnp.where(stay, k, k + 1)), None
 
     return one_step
@@ -124,9 +128,7 @@ def tracking_step_function(
             jnp.asarray(True),
         )  # fmt: skip
         good = result == diffrax.RESULTS.successful
-        last_good = jax.tree_util.tree_map(
-            lambda new, old: jnp.where(good, new, old), y_next, carry.last_good
-        )
+        last_good = tree_select(good, y_next, carry.last_good)
         taken = jnp.where(good, carry.k + 1, carry.taken)
         new = TrackingCarry(y_next, state_next, result, carry.k + 1, last_good, taken)
         return new, None if emit is None else emit(y_next, dense_info)
@@ -151,9 +153,7 @@ def fast_step_function(terms, solver, t0, dt, args, dtype, last_step=None, t1=No
         y_next, _, _, state_next, step_result = solver.step(
             terms, start, end, carry.y, args, carry.solver_state, False
         )
-        result = diffrax.RESULTS.where(
-            carry.result == diffrax.RESULTS.successful, step_result, carry.result
-        )
+        result = first_failure(carry.result, step_result)
         new = carry._replace(
             y=y_next, solver_state=state_next, result=result, k=carry.k + 1
         )
