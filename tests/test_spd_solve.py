@@ -20,6 +20,7 @@ import lagjax as lj
 from lagjax.mechanics.linalg import (
     solve_dense,
     solve_symmetric,
+    solve_symmetric_system,
     solve_unrolled_symmetric,
 )
 from tests.helpers import relative_close
@@ -100,8 +101,33 @@ def test_under_vmap_the_fallback_is_one_branch_not_a_select():
     masses, rhs = mixed_batch()
     closed = jax.make_jaxpr(jax.vmap(solve_symmetric))(masses, rhs)
     shapes = list(_cond_predicates(closed.jaxpr))
-    # The factorization's and the solve's fallback: each one unbatched predicate.
-    assert len(shapes) >= 2 and all(shape == () for shape in shapes)
+    # The LU fallback (and LU's own branches): each one unbatched predicate.
+    assert len(shapes) >= 1 and all(shape == () for shape in shapes)
+
+
+def _unjudged(m, b):
+    return solve_symmetric_system(lambda: (m, b), judge=False)
+
+
+def test_unjudged_solve_takes_lu_only_where_cholesky_fails():
+    masses, rhs = mixed_batch()
+    x, singular = jax.jit(jax.vmap(_unjudged))(masses, rhs)
+    expected = np.linalg.solve(masses, rhs[..., None])[..., 0]
+    for member in range(3):
+        assert relative_close(x[member], expected[member], 1e-12)
+    assert not np.any(singular)
+    # Positive definite, cond 1e15: judged singular, but unjudged the factor is
+    # used as it is (finite, never flagged).
+    nearly = jnp.diag(jnp.array([1.0] * (N - 1) + [1e-15]))
+    b = jnp.ones(N)
+    assert bool(solve_symmetric(nearly, b)[1])
+    x_nearly, flagged = _unjudged(nearly, b)
+    assert not bool(flagged)
+    assert relative_close(x_nearly, np.linalg.solve(np.asarray(nearly), b), 1e-12)
+    # A singular indefinite matrix: Cholesky fails, LU judges.
+    assert bool(
+        _unjudged(jnp.asarray(singular_symmetric(np.random.default_rng(2))), b)[1]
+    )
 
 
 def _closed_form_tangent(mass, rhs, dmass, drhs):
@@ -109,14 +135,15 @@ def _closed_form_tangent(mass, rhs, dmass, drhs):
     return np.linalg.solve(mass, drhs - dmass @ x)
 
 
-def test_jvp_and_grad_match_the_closed_form_in_a_mixed_batch():
+@pytest.mark.parametrize("solve", [solve_symmetric, _unjudged])
+def test_jvp_and_grad_match_the_closed_form_in_a_mixed_batch(solve):
     masses, rhs = mixed_batch()
     rng = np.random.default_rng(4)
     dmasses, drhs = rng.normal(size=masses.shape), rng.normal(size=rhs.shape)
     dmasses = dmasses + np.swapaxes(dmasses, 1, 2)
 
     def solution(m, b):
-        return jax.vmap(solve_symmetric)(m, b)[0]
+        return jax.vmap(solve)(m, b)[0]
 
     _, tangent = jax.jit(lambda *a: jax.jvp(solution, a[:2], a[2:]))(
         masses, rhs, dmasses, drhs

@@ -38,7 +38,7 @@ from jax.flatten_util import ravel_pytree
 from .linalg import (
     UNROLLED_SOLVE_LIMIT,
     raise_if_singular,
-    solve_symmetric,
+    solve_symmetric_system,
     solve_unrolled,
     solve_unrolled_symmetric,
 )
@@ -160,10 +160,13 @@ def euler_lagrange_acceleration(
 
         qddot, singular = _solve_scalar(scalar_system, poison=check == "nan")
     else:
-        mass, rhs_array = _dense_system(lag_flat, q_flat, v_flat, t)
-        if force is not None:
-            rhs_array = rhs_array + force
-        qddot, singular = solve_symmetric(mass, rhs_array)
+
+        def dense_system():
+            mass, rhs = _dense_system(lag_flat, q_flat, v_flat, t)
+            return mass, (rhs if force is None else rhs + force)
+
+        # Without a check the verdict is discarded, so the factor is not judged.
+        qddot, singular = solve_symmetric_system(dense_system, judge=bool(check))
     return unravel(apply_singular_check(qddot, singular, check))
 
 

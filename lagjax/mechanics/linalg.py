@@ -11,10 +11,11 @@ for physical systems, positive definite. Four forms:
   formulation's 4–6 coordinates): unrolled LDLᵀ, fused like the cofactor form,
   with the LU fallback of `solve_symmetric` for an indefinite or singular M.
 - `solve_dense` works on arrays of any size (LU with partial pivoting).
-- `solve_symmetric` works on arrays of any size for a symmetric M that is usually
-  positive definite: Cholesky (half the work of LU, and what a hand-written solver
-  of a physical M uses), with LU as the fallback for the rare indefinite or
-  ill-conditioned M — decided per batch under `vmap` (see its docstring).
+- `solve_symmetric_system` (and `solve_symmetric` for a matrix at hand) works on
+  arrays of any size for a symmetric M that is usually positive definite:
+  Cholesky (half the work of LU, and what a hand-written solver of a physical M
+  uses), with LU as the fallback for the rare indefinite or ill-conditioned M —
+  decided per batch under `vmap` (see its docstring).
 
 All return a flag that is true when M is numerically singular; callers turn it into
 a run-time error with `raise_if_singular` instead of passing on inf/NaN.
@@ -22,8 +23,9 @@ a run-time error with `raise_if_singular` instead of passing on inf/NaN.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
-from typing import Any, NamedTuple
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -114,103 +116,94 @@ def solve_dense(m: jax.Array, rhs: jax.Array) -> tuple[jax.Array, jax.Array]:
     return jsl.lu_solve((lu, pivots), rhs), singular
 
 
-class _SymmetricFactors(NamedTuple):
-    fallback: jax.Array  # LU was formed (for some member, under vmap)
-    sound: jax.Array  # this member's Cholesky factor is used
-    cholesky: jax.Array  # the identity where not sound, so never NaN
-    lu: jax.Array  # zeros when LU was not formed
-    pivots: jax.Array
-    singular: jax.Array
-
-
-def _sound_cholesky(m: jax.Array) -> tuple[jax.Array, jax.Array]:
-    """The Cholesky factor of m and whether it is sound (exists, well conditioned)."""
-    # Reads the lower triangle only; a failed factorization comes back as NaN.
-    cholesky = jax.lax.linalg.cholesky(m, symmetrize_input=False)
-    squared_pivots = jnp.diagonal(cholesky) ** 2  # the pivots of LDLᵀ
+def _factor_verdict(factor: jax.Array, judge: bool) -> jax.Array:
+    """Whether a Cholesky factor is used: it exists and, when `judge`, no squared
+    diagonal entry (a pivot of LDLᵀ) is relatively tiny."""
+    if not judge:
+        # A failed factorization comes back filled with NaN: one entry tells.
+        return jnp.isfinite(factor[..., 0, 0])
+    squared_pivots = jnp.diagonal(factor, axis1=-2, axis2=-1) ** 2
+    threshold = _singular_threshold(factor.shape[-1], factor.dtype)
     # False for NaN, zero or relatively tiny pivots: then LU solves and judges.
-    threshold = _singular_threshold(m.shape[-1], m.dtype)
-    return cholesky, jnp.min(squared_pivots) > threshold * jnp.max(squared_pivots)
-
-
-def _factor_symmetric(m: jax.Array) -> _SymmetricFactors:
-    """Cholesky factor, whether it is sound, and LU factors only when needed."""
-    n = m.shape[-1]
-    cholesky, sound = _sound_cholesky(m)
-
-    def with_lu():
-        lu, pivots, singular = _lu_verdict(m)
-        # A member whose Cholesky failed must not carry NaN into the (discarded)
-        # Cholesky solve: 0 × NaN would reach the gradient.
-        safe = jnp.where(sound, cholesky, jnp.eye(n, dtype=m.dtype))
-        return safe, lu, pivots, ~sound & singular
-
-    def without_lu():
-        pivots = jnp.zeros(m.shape[:-1], dtype=np.int32)
-        return cholesky, jnp.zeros_like(m), pivots, jnp.zeros((), dtype=bool)
-
-    fallback = any_in_batch(~sound)
-    return _SymmetricFactors(
-        fallback, sound, *jax.lax.cond(fallback, with_lu, without_lu)
+    return jnp.min(squared_pivots, axis=-1) > threshold * jnp.max(
+        squared_pivots, axis=-1
     )
 
 
-def _solve_factored(factors: _SymmetricFactors, rhs: jax.Array) -> jax.Array:
-    by_cholesky = jsl.cho_solve((factors.cholesky, True), rhs)
+@functools.partial(jax.custom_jvp, nondiff_argnums=(2,))
+def _cholesky_solve(
+    m: jax.Array, rhs: jax.Array, judge: bool
+) -> tuple[jax.Array, jax.Array]:
+    """`(x, sound)`: x from the Cholesky factor of m (lower triangle read), and
+    whether that factor is to be used (`_factor_verdict`)."""
+    factor = jax.lax.linalg.cholesky(m, symmetrize_input=False)
+    return jsl.cho_solve((factor, True), rhs), _factor_verdict(factor, judge)
 
-    def with_lu():
-        by_lu = jsl.lu_solve((factors.lu, factors.pivots), rhs)
-        return jnp.where(factors.sound, by_cholesky, by_lu)
 
-    return jax.lax.cond(factors.fallback, with_lu, lambda: by_cholesky)
+@_cholesky_solve.defjvp
+def _cholesky_solve_jvp(judge: bool, primals, tangents) -> tuple[Any, Any]:
+    # dx = m⁻¹(d rhs − dm x), with the factor already at hand (JAX's own Cholesky
+    # derivative would cost two triangular solves with a matrix).
+    m, rhs = primals
+    dm, drhs = tangents
+    factor = jax.lax.linalg.cholesky(m, symmetrize_input=False)
+    sound = _factor_verdict(factor, judge)
+    # Where LU takes over, x and dx are discarded; they must still not be NaN,
+    # or reverse mode would multiply the discarded NaN by a zero cotangent.
+    identity = jnp.broadcast_to(jnp.eye(m.shape[-1], dtype=m.dtype), m.shape)
+    safe = jnp.where(sound[..., None, None], factor, identity)
+    x = jsl.cho_solve((safe, True), rhs)
+    dx = jsl.cho_solve((safe, True), drhs - dm @ x)
+    no_tangent = np.zeros(sound.shape, dtype=jax.dtypes.float0)
+    return (x, sound), (dx, no_tangent)
 
 
-@jax.custom_jvp
-def solve_symmetric(m: jax.Array, rhs: jax.Array) -> tuple[jax.Array, jax.Array]:
-    r"""Solve m x = rhs for a symmetric m, by Cholesky when m is positive definite.
+def solve_symmetric_system(
+    system: Callable[[], tuple[jax.Array, jax.Array]], *, judge: bool = True
+) -> tuple[jax.Array, jax.Array]:
+    r"""Solve m x = rhs for the symmetric `(m, rhs) = system()`, by Cholesky when m
+    is positive definite; LU with partial pivoting only where it is not.
 
-    Only the lower triangle of m is read by Cholesky. Returns `(x, singular)`.
-    When the Cholesky factor exists and no squared diagonal entry of it (the
-    pivots of $LDL^T$) is below `solve_dense`'s relative threshold, m counts as
-    nonsingular and LU is never formed; otherwise (m indefinite, singular or
-    nearly so) LU with partial pivoting solves and judges, as `solve_dense` does.
-    An indefinite but nonsingular m is therefore solved exactly too.
+    With `judge` (the default), the Cholesky factor is used when it exists and
+    no squared diagonal entry of it (a pivot of $LDL^T$) is below `solve_dense`'s
+    relative threshold; otherwise (m indefinite, singular or nearly so) LU solves
+    and judges, so an indefinite but nonsingular m is solved exactly and
+    `singular` is `solve_dense`'s verdict. Without `judge` — for callers that
+    discard the verdict, like an integration loop — LU is used only where the
+    factorization failed (m not positive definite), decided by one entry of the
+    factor, and a nearly singular positive definite m is not flagged.
 
-    The fallback is a `lax.cond`. Under `vmap` a batched predicate would turn it
-    into a select that runs both factorizations for every member; here the
-    predicate is reduced over the batch first (`jax.custom_batching.custom_vmap`),
-    so LU runs only when some member needs it, and then only those members take
-    its answer.
+    The fallback is a `lax.cond` whose predicate is reduced over the batch under
+    `vmap` (`any_in_batch`), so LU runs only when some member needs it, and then
+    only those members take its answer. Its branch calls `system` again rather
+    than taking m as an operand: XLA then keeps m's fused computation feeding the
+    factorization as it is, where an operand shared with the branch made it
+    recompute m's last fusion (n-link pendulum, n = 8 and 16,
+    `benchmarks/derivation_overhead.py`: 1.53 → 1.38× and 1.52 → 1.36× the
+    hand-written twin, one trajectory).
 
-    Derivatives reuse the factors: $dx = m^{-1}(d\,\mathrm{rhs} - dm\,x)$ (a
-    custom JVP, linear in the tangents, so reverse mode transposes it; JAX's own
-    Cholesky JVP would cost two triangular solves with a matrix, and propagate
-    the NaN of a failed factorization).
+    Derivatives: $dx = m^{-1}(d\,\mathrm{rhs} - dm\,x)$ with the Cholesky factor
+    (a custom JVP, linear in the tangents, so reverse mode transposes it); JAX's
+    own rules through LU where LU answers. Returns `(x, singular)`.
     """
-    # Factorization and solve in one branch each: one `cond` per call, where the
-    # derivative rule, which solves twice with the same factors, needs two.
-    cholesky, sound = _sound_cholesky(m)
+    m, rhs = system()
+    x, sound = _cholesky_solve(m, rhs, judge)
 
     def with_lu():
-        by_lu, singular = solve_dense(m, rhs)
-        by_cholesky = jsl.cho_solve((cholesky, True), rhs)
-        return jnp.where(sound, by_cholesky, by_lu), ~sound & singular
+        m_again, rhs_again = system()
+        by_lu, singular = solve_dense(m_again, rhs_again)
+        return jnp.where(sound[..., None], x, by_lu), ~sound & singular
 
     def without_lu():
-        return jsl.cho_solve((cholesky, True), rhs), jnp.zeros((), dtype=bool)
+        return x, jnp.zeros(sound.shape, dtype=bool)
 
     return jax.lax.cond(any_in_batch(~sound), with_lu, without_lu)
 
 
-@solve_symmetric.defjvp
-def _solve_symmetric_jvp(primals, tangents) -> tuple[Any, Any]:
-    m, rhs = primals
-    dm, drhs = tangents
-    factors = _factor_symmetric(m)
-    x = _solve_factored(factors, rhs)
-    dx = _solve_factored(factors, drhs - dm @ x)
-    no_tangent = np.zeros(factors.singular.shape, dtype=jax.dtypes.float0)
-    return (x, factors.singular), (dx, no_tangent)
+def solve_symmetric(m: jax.Array, rhs: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """`solve_symmetric_system` for a matrix and right-hand side at hand (judged).
+    Returns `(x, singular)`."""
+    return solve_symmetric_system(lambda: (m, rhs))
 
 
 def _unrolled_ldl_solve(
