@@ -25,7 +25,6 @@ from typing import Any
 
 import equinox as eqx
 import jax
-import jax.numpy as jnp
 
 from ..system import AbstractSystem, is_partitioned
 from .functions import as_system_function
@@ -37,6 +36,7 @@ from .signature import (
     check_scalar,
     positional_arity,
 )
+from .small_gradient import small_gradient
 
 
 class AbstractHamiltonian(AbstractSystem):
@@ -217,26 +217,6 @@ class SeparableHamiltonian(AbstractHamiltonian):
     ) -> tuple[Any, Any]:
         check_same_structure(q, p, "q", "p")
         return self.velocity(q, p, t, args), self.potential_force(q, t, args)
-
-
-# Up to this many coordinates a gradient is taken in forward mode: n tangent passes
-# compile to fewer kernels than one reverse pass (XLA CPU pays per kernel). Measured
-# on Kepler's force, -∂(-1/|q|)/∂q: Störmer-Verlet 65 -> 59 ns/step, Yoshida4
-# 122 -> 112 (benchmarks/solver_overhead.py --clock cpu); differs at round-off.
-FORWARD_GRADIENT_LIMIT = 6
-
-
-def small_gradient(fn: Callable[..., jax.Array]) -> Callable[..., Any]:
-    """∂fn/∂x for scalar fn(x, *rest): forward mode for a few coordinates, reverse
-    mode above `FORWARD_GRADIENT_LIMIT`."""
-
-    def gradient(x, *rest):
-        size = sum(jnp.size(leaf) for leaf in jax.tree_util.tree_leaves(x))
-        if size <= FORWARD_GRADIENT_LIMIT:
-            return jax.jacfwd(fn)(x, *rest)
-        return jax.grad(fn)(x, *rest)
-
-    return gradient
 
 
 class LegendreHamiltonian(AbstractHamiltonian):
