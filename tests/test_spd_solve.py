@@ -236,3 +236,35 @@ def test_unrolled_form_exact_in_a_mixed_batch_with_nan_free_gradients():
         full = -np.outer(adjoint, x)
         expected = np.triu(full + full.T) - np.diag(np.diag(full))
         assert relative_close(grad_m[member], expected, 1e-11)
+
+
+def _cholesky_operand_ranks(jaxpr):
+    for equation in jaxpr.eqns:
+        if equation.primitive.name == "cholesky":
+            yield equation.invars[0].aval.ndim
+        for sub in jax.extend.core.jaxprs_in_params(equation.params):
+            yield from _cholesky_operand_ranks(sub)
+
+
+@pytest.mark.parametrize("members, mapped", [(5, False), (1025, True)])
+def test_large_batches_factor_one_member_at_a_time(members, mapped):
+    # jaxlib's batched CPU Cholesky can deadlock when called from XLA's thread
+    # pool (n-link pendulum n = 16 ×512 hung in every try): above a work limit
+    # the dense formulation maps the factorization over the members, so every
+    # Cholesky in the program factors a single matrix. Its derivative rule keeps
+    # the batched factorization (differentiable again); this checks the
+    # undifferentiated run.
+    n = 8  # 1025 × 8³ is above BATCHED_CHOLESKY_WORK_LIMIT, 5 × 8³ below
+    acceleration = lj.Lagrangian(n_link_lagrangian).acceleration
+    q = jnp.tile(jnp.linspace(0.3, 1.0, n), (members, 1))
+    closed = jax.make_jaxpr(jax.vmap(lambda a, b: acceleration(a, b, check=False)))(
+        q, jnp.zeros_like(q)
+    )
+    ranks = list(_cholesky_operand_ranks(closed.jaxpr))
+    assert ranks and all(rank == (2 if mapped else 3) for rank in ranks)
+    # And the answers are those of the unbatched calls.
+    scale = jnp.linspace(0.5, 1.5, members)[:, None]
+    batched = jax.jit(jax.vmap(acceleration))(q * scale, q)
+    for member in (0, members // 2, members - 1):
+        single = acceleration(q[member] * scale[member], q[member])
+        assert relative_close(batched[member], single, 1e-13)

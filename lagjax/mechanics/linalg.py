@@ -130,13 +130,48 @@ def _factor_verdict(factor: jax.Array, judge: bool) -> jax.Array:
     )
 
 
+# Batched factorizations up to this much work (members × n³) stay one LAPACK call;
+# above it they are mapped per member (`_cholesky_per_member`). It is the largest
+# size measured hang-free many times here (n = 16 ×64).
+BATCHED_CHOLESKY_WORK_LIMIT = 64 * 16**3
+
+
+@jax.custom_batching.custom_vmap
+def _cholesky_per_member(m: jax.Array) -> jax.Array:
+    """The Cholesky factor of m (lower triangle read); under `vmap` beyond
+    `BATCHED_CHOLESKY_WORK_LIMIT`, one LAPACK call per member (`lax.map`)
+    instead of one batched call.
+
+    Why: jaxlib 0.10.2's batched CPU Cholesky splits a large batch over XLA's
+    intra-op thread pool and waits for it; called from a thread of that pool —
+    which happens when XLA has split the step's large kernels over threads — two
+    such calls can wait on each other for ever. Measured here in an RK4 scan of
+    the n-link pendulum: n = 24 ×64, n = 16 ×512 and n = 12 ×1024 hung in every
+    try (the hand-written Cholesky twin too, at n = 16 ×512), never once mapped
+    per member; n ≤ 16 ×64 never hung in dozens of runs. The map costs 12–20 % of
+    the batched step (n = 8 to 16 ×64), hence only above the limit.
+    """
+    return jax.lax.linalg.cholesky(m, symmetrize_input=False)
+
+
+@_cholesky_per_member.def_vmap
+def _cholesky_per_member_rule(axis_size, in_batched, m):
+    if not in_batched[0]:
+        return _cholesky_per_member(m), False
+    if axis_size * m.shape[-1] ** 3 <= BATCHED_CHOLESKY_WORK_LIMIT:
+        return jax.lax.linalg.cholesky(m, symmetrize_input=False), True
+    return jax.lax.map(_cholesky_per_member, m), True
+
+
 @functools.partial(jax.custom_jvp, nondiff_argnums=(2,))
 def _cholesky_solve(
     m: jax.Array, rhs: jax.Array, judge: bool
 ) -> tuple[jax.Array, jax.Array]:
     """`(x, sound)`: x from the Cholesky factor of m (lower triangle read), and
-    whether that factor is to be used (`_factor_verdict`)."""
-    factor = jax.lax.linalg.cholesky(m, symmetrize_input=False)
+    whether that factor is to be used (`_factor_verdict`). Undifferentiated runs
+    factor per member (`_cholesky_per_member`); the derivative rule keeps JAX's
+    batched factorization, which reverse mode can differentiate again."""
+    factor = _cholesky_per_member(m)
     return jsl.cho_solve((factor, True), rhs), _factor_verdict(factor, judge)
 
 
