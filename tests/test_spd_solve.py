@@ -94,18 +94,19 @@ def test_mixed_batch_every_member_exact(solve):
     assert not np.any(singular)
 
 
-def _cond_predicates(jaxpr):
+def _equations_named(jaxpr, name):
+    """Every equation of primitive `name` in jaxpr and its sub-jaxprs."""
     for equation in jaxpr.eqns:
-        if equation.primitive.name == "cond":
-            yield equation.invars[0].aval.shape
+        if equation.primitive.name == name:
+            yield equation
         for sub in jax.extend.core.jaxprs_in_params(equation.params):
-            yield from _cond_predicates(sub)
+            yield from _equations_named(sub, name)
 
 
 def test_under_vmap_the_fallback_is_one_branch_not_a_select():
     masses, rhs = mixed_batch()
     closed = jax.make_jaxpr(jax.vmap(solve_symmetric))(masses, rhs)
-    shapes = list(_cond_predicates(closed.jaxpr))
+    shapes = [e.invars[0].aval.shape for e in _equations_named(closed.jaxpr, "cond")]
     # The LU fallback (and LU's own branches): each one unbatched predicate.
     assert len(shapes) >= 1 and all(shape == () for shape in shapes)
 
@@ -238,14 +239,6 @@ def test_unrolled_form_exact_in_a_mixed_batch_with_nan_free_gradients():
         assert relative_close(grad_m[member], expected, 1e-11)
 
 
-def _cholesky_operand_ranks(jaxpr):
-    for equation in jaxpr.eqns:
-        if equation.primitive.name == "cholesky":
-            yield equation.invars[0].aval.ndim
-        for sub in jax.extend.core.jaxprs_in_params(equation.params):
-            yield from _cholesky_operand_ranks(sub)
-
-
 @pytest.mark.parametrize("members, mapped", [(5, False), (1025, True)])
 def test_large_batches_factor_one_member_at_a_time(members, mapped):
     # jaxlib's batched CPU Cholesky can deadlock when called from XLA's thread
@@ -260,7 +253,7 @@ def test_large_batches_factor_one_member_at_a_time(members, mapped):
     closed = jax.make_jaxpr(jax.vmap(lambda a, b: acceleration(a, b, check=False)))(
         q, jnp.zeros_like(q)
     )
-    ranks = list(_cholesky_operand_ranks(closed.jaxpr))
+    ranks = [e.invars[0].aval.ndim for e in _equations_named(closed.jaxpr, "cholesky")]
     assert ranks and all(rank == (2 if mapped else 3) for rank in ranks)
     # And the answers are those of the unbatched calls.
     scale = jnp.linspace(0.5, 1.5, members)[:, None]
