@@ -242,7 +242,7 @@ def test_unrolled_form_exact_in_a_mixed_batch_with_nan_free_gradients():
 @pytest.mark.parametrize("members, mapped", [(5, False), (1025, True)])
 def test_large_batches_factor_one_member_at_a_time(members, mapped):
     # jaxlib's batched CPU Cholesky can deadlock when called from XLA's thread
-    # pool (n-link pendulum n = 16 ×512 hung in every try): above a work limit
+    # pool (n-link pendulum n = 16 ×512 hung in each of 3 tries): above a work limit
     # the dense formulation maps the factorization over the members, so every
     # Cholesky in the program factors a single matrix. Its derivative rule keeps
     # the batched factorization (differentiable again); this checks the
