@@ -148,8 +148,8 @@ def _cholesky_per_member(m: jax.Array) -> jax.Array:
     such calls can wait on each other for ever. Measured here in an RK4 scan of
     the n-link pendulum: n = 24 ×64, n = 16 ×512 and n = 12 ×1024 hung in 14 of
     15 tries (the hand-written Cholesky twin too, at n = 16 ×512), in none of 14
-    mapped per member; n ≤ 16 ×64 never hung in dozens of runs. The map costs 12–20 % of
-    the batched step (n = 8 to 16 ×64), hence only above the limit.
+    mapped per member; n ≤ 16 ×64 never hung in dozens of runs. The map costs
+    12–20 % of the batched step (n = 8 to 16 ×64), hence only above the limit.
     """
     return jax.lax.linalg.cholesky(m, symmetrize_input=False)
 

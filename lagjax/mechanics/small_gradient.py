@@ -45,10 +45,10 @@ def small_gradient(fn: Callable[..., jax.Array]) -> Callable[..., Any]:
     of fn where it has none), reverse mode above."""
 
     def gradient(x: Any, *rest: Any) -> Any:
-        x_flat, unravel = ravel_pytree(x)
-        size = x_flat.shape[0]
+        size = sum(jnp.size(leaf) for leaf in jax.tree_util.tree_leaves(x))
         if size > FORWARD_GRADIENT_LIMIT:
             return jax.grad(fn)(x, *rest)
+        x_flat, unravel = ravel_pytree(x)
         floating = jnp.issubdtype(x_flat.dtype, jnp.floating)
         twin = (
             scalarize(lambda xf: fn(unravel(xf), *rest), x_flat) if floating else None
