@@ -115,12 +115,13 @@ def test_under_vmap_the_fallback_is_one_branch_not_a_select():
 
 def test_unjudged_solve_flags_only_what_cholesky_cannot_factor():
     # Positive definite, cond 1e15: judged singular, but unjudged the factor is
-    # used as it is (finite, never flagged).
+    # used as it is (finite, never flagged) — on CPU; other backends solve by LU
+    # alone, whose verdict is always judged.
     nearly = jnp.diag(jnp.array([1.0] * (N - 1) + [1e-15]))
     b = jnp.ones(N)
     assert bool(solve_symmetric(nearly, b)[1])
     x_nearly, flagged = _unjudged(nearly, b)
-    assert not bool(flagged)
+    assert bool(flagged) == (jax.default_backend() != "cpu")
     assert relative_close(x_nearly, np.linalg.solve(np.asarray(nearly), b), 1e-12)
     # A singular indefinite matrix: Cholesky fails, LU judges.
     assert bool(
@@ -241,29 +242,35 @@ def test_unrolled_form_exact_in_a_mixed_batch_with_nan_free_gradients():
         assert relative_close(grad_m[member], expected, 1e-11)
 
 
-def _factorization_shapes(function, platform: str, *inputs) -> set[str]:
-    """Operand shapes of the Cholesky calls in `function` exported for `platform`
-    (no such device needed: export only lowers)."""
+def _factorization_shapes(function, platform: str, *inputs) -> dict[str, set[str]]:
+    """{"potrf" (Cholesky) / "getrf" (LU): operand shapes} of the factorizations in
+    `function` exported for `platform` (no such device needed: export only lowers)."""
     module = jax.export.export(jax.jit(function), platforms=[platform])(*inputs)
-    calls = re.findall(r"custom_call @(\w*potrf\w*)\((.*)", module.mlir_module())
-    return {re.search(r"tensor<([\dx]+)xf64>", rest).group(1) for _, rest in calls}
+    calls = re.findall(r"custom_call @\w*?(potrf|getrf)\w*\((.*)", module.mlir_module())
+    shapes: dict[str, set[str]] = {}
+    for kind, rest in calls:
+        shape = re.search(r"tensor<([\dx]+)xf64>", rest).group(1)
+        shapes.setdefault(kind, set()).add(shape)
+    return shapes
 
 
 @pytest.mark.parametrize("members, mapped", [(5, False), (1025, True)])
-def test_large_batches_factor_one_member_at_a_time_on_cpu_only(members, mapped):
+def test_factorizations_per_backend(members, mapped):
     # jaxlib's batched CPU Cholesky can deadlock when called from XLA's thread
     # pool (n-link pendulum n = 16 ×512 hung in each of 3 tries): above a work limit
     # the dense formulation maps the factorization over the members on CPU, so
-    # every Cholesky there factors a single matrix; a GPU keeps the batched call.
-    # Its derivative rule keeps the batched factorization (differentiable again);
+    # every Cholesky there factors a single matrix. A GPU solves by LU alone, one
+    # batched call, with no branch (a branch waits for the host there). The
+    # derivative rule keeps the batched factorization (differentiable again);
     # this checks the undifferentiated run.
     n = 8  # 1025 × 8³ is above BATCHED_CHOLESKY_WORK_LIMIT, 5 × 8³ below
     acceleration = lj.Lagrangian(n_link_lagrangian).acceleration
     q = jnp.tile(jnp.linspace(0.3, 1.0, n), (members, 1))
     run = jax.vmap(lambda a, b: acceleration(a, b, check=False))
     on_cpu = _factorization_shapes(run, "cpu", q, jnp.zeros_like(q))
-    assert on_cpu == ({"8x8"} if mapped else {f"{members}x8x8"})
-    assert _factorization_shapes(run, "cuda", q, q) == {f"{members}x8x8"}
+    assert on_cpu["potrf"] == ({"8x8"} if mapped else {f"{members}x8x8"})
+    assert on_cpu["getrf"] == {f"{members}x8x8"}  # the fallback, in its branch
+    assert _factorization_shapes(run, "cuda", q, q) == {"getrf": {f"{members}x8x8"}}
     # And the answers are those of the unbatched calls.
     scale = jnp.linspace(0.5, 1.5, members)[:, None]
     batched = jax.jit(jax.vmap(acceleration))(q * scale, q)
