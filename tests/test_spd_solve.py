@@ -25,9 +25,12 @@ from lagjax.mechanics.linalg import (
     solve_symmetric_system,
     solve_unrolled_symmetric,
 )
+from lagjax.mechanics.loop_factorizations import LOOP_FACTORIZATION_LIMIT
 from tests.helpers import relative_close
 
 N = 7
+# The in-kernel loops (up to LOOP_FACTORIZATION_LIMIT unknowns) and LAPACK above.
+SIZES = pytest.mark.parametrize("n", [N, LOOP_FACTORIZATION_LIMIT + 1])
 
 
 def positive_definite(rng, n=N):
@@ -50,21 +53,22 @@ def singular_symmetric(rng, n=N):
     return mass
 
 
-def mixed_batch():
+def mixed_batch(n=N):
     rng = np.random.default_rng(3)
     masses = [
-        positive_definite(rng),
-        indefinite_zero_minor(rng),
-        positive_definite(rng),
+        positive_definite(rng, n),
+        indefinite_zero_minor(rng, n),
+        positive_definite(rng, n),
     ]
-    rhs = rng.normal(size=(3, N))
+    rhs = rng.normal(size=(3, n))
     return np.stack(masses), rhs
 
 
+@SIZES
 @pytest.mark.parametrize("make", [positive_definite, indefinite_zero_minor])
-def test_solves_exactly_positive_definite_or_not(make):
+def test_solves_exactly_positive_definite_or_not(make, n):
     rng = np.random.default_rng(0)
-    mass, rhs = make(rng), rng.normal(size=N)
+    mass, rhs = make(rng, n), rng.normal(size=n)
     expected = np.linalg.solve(mass, rhs)
     for solve in (solve_symmetric, jax.jit(solve_symmetric)):
         x, singular = solve(jnp.asarray(mass), jnp.asarray(rhs))
@@ -72,13 +76,14 @@ def test_solves_exactly_positive_definite_or_not(make):
         assert not bool(singular)
 
 
-def test_singular_verdict_matches_lu():
+@SIZES
+def test_singular_verdict_matches_lu(n):
     rng = np.random.default_rng(1)
-    rhs = jnp.asarray(rng.normal(size=N))
-    for mass in (singular_symmetric(rng), np.zeros((N, N))):
+    rhs = jnp.asarray(rng.normal(size=n))
+    for mass in (singular_symmetric(rng, n), np.zeros((n, n))):
         assert bool(solve_symmetric(jnp.asarray(mass), rhs)[1])
         assert bool(solve_dense(jnp.asarray(mass), rhs)[1])
-    nearly = np.diag([1.0] * (N - 1) + [1e-15])  # positive definite, cond 1e15
+    nearly = np.diag([1.0] * (n - 1) + [1e-15])  # positive definite, cond 1e15
     assert bool(solve_symmetric(jnp.asarray(nearly), rhs)[1])
 
 
@@ -86,9 +91,10 @@ def _unjudged(m, b):
     return solve_symmetric_system(lambda: (m, b), judge=False)
 
 
+@SIZES
 @pytest.mark.parametrize("solve", [solve_symmetric, _unjudged])
-def test_mixed_batch_every_member_exact(solve):
-    masses, rhs = mixed_batch()
+def test_mixed_batch_every_member_exact(solve, n):
+    masses, rhs = mixed_batch(n)
     x, singular = jax.jit(jax.vmap(solve))(masses, rhs)
     expected = np.linalg.solve(masses, rhs[..., None])[..., 0]
     for member in range(3):
@@ -113,19 +119,20 @@ def test_under_vmap_the_fallback_is_one_branch_not_a_select():
     assert len(shapes) >= 1 and all(shape == () for shape in shapes)
 
 
-def test_unjudged_solve_flags_only_what_cholesky_cannot_factor():
+@SIZES
+def test_unjudged_solve_flags_only_what_cholesky_cannot_factor(n):
     # Positive definite, cond 1e15: judged singular, but unjudged the factor is
     # used as it is (finite, never flagged) — on CPU; other backends solve by LU
     # alone, whose verdict is always judged.
-    nearly = jnp.diag(jnp.array([1.0] * (N - 1) + [1e-15]))
-    b = jnp.ones(N)
+    nearly = jnp.diag(jnp.array([1.0] * (n - 1) + [1e-15]))
+    b = jnp.ones(n)
     assert bool(solve_symmetric(nearly, b)[1])
     x_nearly, flagged = _unjudged(nearly, b)
     assert bool(flagged) == (jax.default_backend() != "cpu")
     assert relative_close(x_nearly, np.linalg.solve(np.asarray(nearly), b), 1e-12)
     # A singular indefinite matrix: Cholesky fails, LU judges.
     assert bool(
-        _unjudged(jnp.asarray(singular_symmetric(np.random.default_rng(2))), b)[1]
+        _unjudged(jnp.asarray(singular_symmetric(np.random.default_rng(2), n)), b)[1]
     )
 
 
@@ -134,9 +141,10 @@ def _closed_form_tangent(mass, rhs, dmass, drhs):
     return np.linalg.solve(mass, drhs - dmass @ x)
 
 
+@SIZES
 @pytest.mark.parametrize("solve", [solve_symmetric, _unjudged])
-def test_jvp_and_grad_match_the_closed_form_in_a_mixed_batch(solve):
-    masses, rhs = mixed_batch()
+def test_jvp_and_grad_match_the_closed_form_in_a_mixed_batch(solve, n):
+    masses, rhs = mixed_batch(n)
     rng = np.random.default_rng(4)
     dmasses, drhs = rng.normal(size=masses.shape), rng.normal(size=rhs.shape)
     dmasses = dmasses + np.swapaxes(dmasses, 1, 2)
@@ -254,23 +262,30 @@ def _factorization_shapes(function, platform: str, *inputs) -> dict[str, set[str
     return shapes
 
 
-@pytest.mark.parametrize("members, mapped", [(5, False), (1025, True)])
-def test_factorizations_per_backend(members, mapped):
+# (coordinates, members, LAPACK calls on CPU: {routine: operand shapes})
+FACTORIZATIONS = [
+    (8, 5, {}),  # in-kernel loops, no LAPACK at all
+    (17, 5, {"potrf": {"5x17x17"}, "getrf": {"5x17x17"}}),  # one batched call
+    (17, 64, {"potrf": {"17x17"}, "getrf": {"64x17x17"}}),  # factored per member
+]
+
+
+@pytest.mark.parametrize("n, members, on_cpu", FACTORIZATIONS)
+def test_factorizations_per_backend(n, members, on_cpu):
+    # Up to 16 coordinates the dense formulation factors by XLA loops. Above,
     # jaxlib's batched CPU Cholesky can deadlock when called from XLA's thread
-    # pool (n-link pendulum n = 16 ×512 hung in each of 3 tries): above a work limit
-    # the dense formulation maps the factorization over the members on CPU, so
-    # every Cholesky there factors a single matrix. A GPU solves by LU alone, one
-    # batched call, with no branch (a branch waits for the host there). The
-    # derivative rule keeps the batched factorization (differentiable again);
-    # this checks the undifferentiated run.
-    n = 8  # 1025 × 8³ is above BATCHED_CHOLESKY_WORK_LIMIT, 5 × 8³ below
+    # pool (n-link pendulum n = 16 ×512 hung in each of 3 tries), so above a work
+    # limit (64 × 17³ is over it, 5 × 17³ under) it maps the factorization over
+    # the members on CPU; the LU fallback sits in its branch. A GPU solves by LU
+    # alone, one batched call, with no branch (a branch waits for the host
+    # there). The derivative rule keeps the batched factorization
+    # (differentiable again); this checks the undifferentiated run.
     acceleration = lj.Lagrangian(n_link_lagrangian).acceleration
     q = jnp.tile(jnp.linspace(0.3, 1.0, n), (members, 1))
     run = jax.vmap(lambda a, b: acceleration(a, b, check=False))
-    on_cpu = _factorization_shapes(run, "cpu", q, jnp.zeros_like(q))
-    assert on_cpu["potrf"] == ({"8x8"} if mapped else {f"{members}x8x8"})
-    assert on_cpu["getrf"] == {f"{members}x8x8"}  # the fallback, in its branch
-    assert _factorization_shapes(run, "cuda", q, q) == {"getrf": {f"{members}x8x8"}}
+    assert _factorization_shapes(run, "cpu", q, jnp.zeros_like(q)) == on_cpu
+    on_gpu = {"getrf": {f"{members}x{n}x{n}"}}
+    assert _factorization_shapes(run, "cuda", q, q) == on_gpu
     # And the answers are those of the unbatched calls.
     scale = jnp.linspace(0.5, 1.5, members)[:, None]
     batched = jax.jit(jax.vmap(acceleration))(q * scale, q)

@@ -34,6 +34,12 @@ import jax.scipy.linalg as jsl
 import numpy as np
 
 from ..batch_branch import any_in_batch
+from .loop_factorizations import (
+    LOOP_FACTORIZATION_LIMIT,
+    cholesky_by_columns,
+    solve_by_cholesky_factor,
+    solve_by_pivoted_lu,
+)
 
 UNROLLED_SOLVE_LIMIT = 3
 
@@ -98,16 +104,27 @@ def solve_unrolled(
     return x, singular
 
 
+def _pivot_verdict(pivots: jax.Array) -> jax.Array:
+    """Whether the LU pivots (the diagonal of U) say singular: the smallest
+    against the largest."""
+    pivot_sizes = jnp.abs(pivots)
+    largest = jnp.max(pivot_sizes, axis=-1)
+    threshold = _singular_threshold(pivots.shape[-1], pivots.dtype)
+    return (largest == 0) | (jnp.min(pivot_sizes, axis=-1) <= threshold * largest)
+
+
 def _lu_verdict(m: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
-    """LU factors of m and its singular flag (smallest pivot against the largest)."""
-    n = m.shape[-1]
+    """LU factors of m and its singular flag (`_pivot_verdict`)."""
     lu, pivots = jsl.lu_factor(m)
-    pivot_sizes = jnp.abs(jnp.diagonal(lu))
-    largest = jnp.max(pivot_sizes)
-    singular = (largest == 0) | (
-        jnp.min(pivot_sizes) <= _singular_threshold(n, m.dtype) * largest
-    )
-    return lu, pivots, singular
+    return lu, pivots, _pivot_verdict(jnp.diagonal(lu))
+
+
+def _solve_dense_in_kernel(m: jax.Array, rhs: jax.Array):
+    """`solve_dense`, by XLA loops up to `LOOP_FACTORIZATION_LIMIT` unknowns."""
+    if m.shape[-1] > LOOP_FACTORIZATION_LIMIT:
+        return solve_dense(m, rhs)
+    x, pivots = solve_by_pivoted_lu(m, rhs)
+    return x, _pivot_verdict(pivots)
 
 
 def solve_dense(m: jax.Array, rhs: jax.Array) -> tuple[jax.Array, jax.Array]:
@@ -120,8 +137,9 @@ def _factor_verdict(factor: jax.Array, judge: bool) -> jax.Array:
     """Whether a Cholesky factor is used: it exists and, when `judge`, no squared
     diagonal entry (a pivot of LDLᵀ) is relatively tiny."""
     if not judge:
-        # A failed factorization comes back filled with NaN: one entry tells.
-        return jnp.isfinite(factor[..., 0, 0])
+        # A failed factorization is NaN from its failing column on (LAPACK's
+        # entirely): the last diagonal entry tells.
+        return jnp.isfinite(factor[..., -1, -1])
     squared_pivots = jnp.diagonal(factor, axis1=-2, axis2=-1) ** 2
     threshold = _singular_threshold(factor.shape[-1], factor.dtype)
     # False for NaN, zero or relatively tiny pivots: then LU solves and judges.
@@ -175,10 +193,17 @@ def _cholesky_solve(
 ) -> tuple[jax.Array, jax.Array]:
     """`(x, sound)`: x from the Cholesky factor of m (lower triangle read), and
     whether that factor is to be used (`_factor_verdict`). Undifferentiated runs
-    factor per member (`_cholesky_per_member`); the derivative rule keeps JAX's
-    batched factorization, which reverse mode can differentiate again."""
-    factor = _cholesky_per_member(m)
-    return jsl.cho_solve((factor, True), rhs), _factor_verdict(factor, judge)
+    factor by XLA loops up to `LOOP_FACTORIZATION_LIMIT` coordinates
+    (`loop_factorizations`), by LAPACK above, per member for large batches
+    (`_cholesky_per_member`); the derivative rule keeps JAX's batched
+    factorization, which reverse mode can differentiate again."""
+    if m.shape[-1] <= LOOP_FACTORIZATION_LIMIT:
+        factor = cholesky_by_columns(m)
+        x = solve_by_cholesky_factor(factor, rhs)
+    else:
+        factor = _cholesky_per_member(m)
+        x = jsl.cho_solve((factor, True), rhs)
+    return x, _factor_verdict(factor, judge)
 
 
 @_cholesky_solve.defjvp
@@ -214,12 +239,19 @@ def solve_symmetric_system(
     factorization failed (m not positive definite), decided by one entry of the
     factor, and a nearly singular positive definite m is not flagged.
 
+    Up to `LOOP_FACTORIZATION_LIMIT` unknowns both factorizations are XLA loops
+    (`loop_factorizations`), which XLA compiles into the surrounding step (n-link
+    pendulum in an RK4 scan, n = 8 / 16: one trajectory 1.38 / 1.50× the
+    hand-written LAPACK twin → 0.64 / 0.80×, ×64 1.51 / 1.21× → 0.90 / 0.99×),
+    at the price of compile time (that scan: 3.3 / 4.4 s against 0.3 s).
+    Above it they are LAPACK's.
+
     The fallback is a `lax.cond` whose predicate is reduced over the batch under
     `vmap` (`any_in_batch`), so LU runs only when some member needs it, and then
-    only those members take its answer. Its branch calls `system` again rather
-    than taking m as an operand: XLA then keeps m's fused computation feeding the
-    factorization as it is, where an operand shared with the branch made it
-    recompute m's last fusion (n-link pendulum, n = 8 and 16,
+    only those members take its answer. With LAPACK its branch calls `system`
+    again rather than taking m as an operand: XLA then keeps m's fused
+    computation feeding the factorization as it is, where an operand shared with
+    the branch made it recompute m's last fusion (n-link pendulum, n = 8 and 16,
     `benchmarks/derivation_overhead.py`: 1.53 → 1.38× and 1.52 → 1.36× the
     hand-written twin, one trajectory).
 
@@ -243,8 +275,11 @@ def solve_symmetric_system(
         x, sound = _cholesky_solve(m, rhs, judge)
 
         def with_lu():
-            m_again, rhs_again = system()
-            by_lu, singular = solve_dense(m_again, rhs_again)
+            # In-kernel solves take m as it is: deriving it again doubled the
+            # compile time of the kernel, at the same run time.
+            in_kernel = m.shape[-1] <= LOOP_FACTORIZATION_LIMIT
+            m_lu, rhs_lu = (m, rhs) if in_kernel else system()
+            by_lu, singular = _solve_dense_in_kernel(m_lu, rhs_lu)
             return jnp.where(sound[..., None], x, by_lu), ~sound & singular
 
         def without_lu():
