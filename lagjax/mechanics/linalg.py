@@ -212,14 +212,22 @@ def _cholesky_solve_jvp(judge: bool, primals, tangents) -> tuple[Any, Any]:
     # derivative would cost two triangular solves with a matrix).
     m, rhs = primals
     dm, drhs = tangents
-    factor = jax.lax.linalg.cholesky(m, symmetrize_input=False)
+    if m.shape[-1] <= LOOP_FACTORIZATION_LIMIT:
+        factor = cholesky_by_columns(m)
+        solve = solve_by_cholesky_factor
+    else:
+        factor = jax.lax.linalg.cholesky(m, symmetrize_input=False)
+
+        def solve(lower, b):
+            return jsl.cho_solve((lower, True), b)
+
     sound = _factor_verdict(factor, judge)
     # Where LU takes over, x and dx are discarded; they must still not be NaN,
     # or reverse mode would multiply the discarded NaN by a zero cotangent.
     identity = jnp.broadcast_to(jnp.eye(m.shape[-1], dtype=m.dtype), m.shape)
     safe = jnp.where(sound[..., None, None], factor, identity)
-    x = jsl.cho_solve((safe, True), rhs)
-    dx = jsl.cho_solve((safe, True), drhs - dm @ x)
+    x = solve(safe, rhs)
+    dx = solve(safe, drhs - dm @ x)
     no_tangent = np.zeros(sound.shape, dtype=jax.dtypes.float0)
     return (x, sound), (dx, no_tangent)
 
@@ -256,8 +264,11 @@ def solve_symmetric_system(
     hand-written twin, one trajectory).
 
     Derivatives: $dx = m^{-1}(d\,\mathrm{rhs} - dm\,x)$ with the Cholesky factor
-    (a custom JVP, linear in the tangents, so reverse mode transposes it); JAX's
-    own rules through LU where LU answers.
+    (a custom JVP, linear in the tangents, so reverse mode transposes it), by the
+    same loops up to the limit (tangents through an RK4 scan of the n-link
+    pendulum, against the LAPACK twin's: n = 8 one trajectory 0.87 → 0.38×,
+    ×64 1.10 → 0.52×, n = 16 1.17 → 0.24×; gradients 2.96 → 0.50×, 2.21 →
+    1.91×, 3.01 → 1.29×); JAX's own rules through LU where LU answers.
 
     All of this is the CPU's program. Other backends (`lax.platform_dependent`)
     solve by LU with partial pivoting alone, `solve_dense`, whose verdict is
