@@ -218,8 +218,8 @@ def _cholesky_solve_jvp(judge: bool, primals, tangents) -> tuple[Any, Any]:
     else:
         factor = jax.lax.linalg.cholesky(m, symmetrize_input=False)
 
-        def solve(lower, b):
-            return jsl.cho_solve((lower, True), b)
+        def solve(factor, rhs):
+            return jsl.cho_solve((factor, True), rhs)
 
     sound = _factor_verdict(factor, judge)
     # Where LU takes over, x and dx are discarded; they must still not be NaN,
