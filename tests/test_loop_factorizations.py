@@ -13,6 +13,7 @@ import jax.scipy.linalg as jsl
 import numpy as np
 import pytest
 
+from lagjax.mechanics.linalg import solve_dense, solve_dense_in_step
 from lagjax.mechanics.loop_factorizations import (
     cholesky_by_columns,
     solve_by_cholesky_factor,
@@ -20,6 +21,7 @@ from lagjax.mechanics.loop_factorizations import (
 )
 from tests.helpers import relative_close
 from tests.test_spd_solve import (
+    _factorization_shapes,
     indefinite_zero_minor,
     positive_definite,
     singular_symmetric,
@@ -78,3 +80,18 @@ def test_pivoted_lu_under_vmap_pivots_each_member_on_its_own():
     x, _ = jax.jit(jax.vmap(solve_by_pivoted_lu))(jnp.asarray(masses), rhs)
     expected = np.linalg.solve(masses, rhs[..., None])[..., 0]
     assert relative_close(x, expected, 1e-11)
+
+
+def test_solve_dense_in_step_calls_no_lapack_on_cpu():
+    # The constrained systems' saddle solve: loops on CPU (inside the step's
+    # kernel), one LAPACK LU elsewhere; same answer and verdict as `solve_dense`.
+    rng = np.random.default_rng(8)
+    mass, rhs = jnp.asarray(indefinite_zero_minor(rng)), jnp.asarray(rng.normal(size=7))
+    assert _factorization_shapes(solve_dense_in_step, "cpu", mass, rhs) == {}
+    on_gpu = _factorization_shapes(solve_dense_in_step, "cuda", mass, rhs)
+    assert on_gpu == {"getrf": {"7x7"}}
+    x, singular = jax.jit(solve_dense_in_step)(mass, rhs)
+    assert relative_close(x, np.linalg.solve(np.asarray(mass), rhs), 1e-11)
+    assert not bool(singular)
+    zero = jnp.zeros((7, 7))
+    assert bool(solve_dense_in_step(zero, rhs)[1]) and bool(solve_dense(zero, rhs)[1])

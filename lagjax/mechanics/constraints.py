@@ -64,7 +64,7 @@ from jax.core import Tracer
 from jax.flatten_util import ravel_pytree
 
 from .functions import as_system_function
-from .linalg import solve_dense
+from .linalg import solve_dense_in_step
 from .signature import call_with_arity, positional_arity
 
 if TYPE_CHECKING:
@@ -212,7 +212,7 @@ def least_correction(
     n, k = mass.shape[0], jacobian.shape[0]
     saddle = jnp.block([[mass, jacobian.T], [jacobian, jnp.zeros((k, k), mass.dtype)]])
     rhs = jnp.concatenate([jnp.zeros(n, mass.dtype), target])
-    solution, singular = solve_dense(saddle, rhs)
+    solution, singular = solve_dense_in_step(saddle, rhs)
     return solution[:n], -solution[n:], singular
 
 

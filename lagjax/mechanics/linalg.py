@@ -127,6 +127,15 @@ def _solve_dense_in_kernel(m: jax.Array, rhs: jax.Array):
     return x, _pivot_verdict(pivots)
 
 
+def solve_dense_in_step(m: jax.Array, rhs: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """`solve_dense` for a system solved at every step (vector `rhs`): on CPU by
+    XLA loops up to `LOOP_FACTORIZATION_LIMIT` unknowns, which stay inside the
+    step's kernel (`loop_factorizations`); elsewhere, and above, LAPACK."""
+    return jax.lax.platform_dependent(
+        m, rhs, cpu=_solve_dense_in_kernel, default=solve_dense
+    )
+
+
 def solve_dense(m: jax.Array, rhs: jax.Array) -> tuple[jax.Array, jax.Array]:
     """Solve m x = rhs by LU with partial pivoting. Returns `(x, singular)`."""
     lu, pivots, singular = _lu_verdict(m)
