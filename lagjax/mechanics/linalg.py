@@ -259,8 +259,9 @@ def solve_symmetric_system(
     Up to `LOOP_FACTORIZATION_LIMIT` unknowns both factorizations are XLA loops
     (`loop_factorizations`), which XLA compiles into the surrounding step (n-link
     pendulum in an RK4 scan, n = 8 / 16: one trajectory 1.38 / 1.50× the
-    hand-written LAPACK twin → 0.64 / 0.80×, ×64 1.51 / 1.21× → 0.90 / 0.99×),
-    at the price of compile time (that scan: 3.3 / 4.4 s against 0.3 s).
+    hand-written LAPACK twin → 0.64 / 0.77×, ×64 1.51 / 1.21× → 0.92 / 1.05×),
+    at the price of compile time (that scan: 1.7 / 2.6 s one trajectory and
+    3.9 / 5.0 s ×64, against the twin's 0.3–0.5 s).
     Above it they are LAPACK's.
 
     The fallback is a `lax.cond` whose predicate is reduced over the batch under

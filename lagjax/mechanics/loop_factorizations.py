@@ -7,8 +7,9 @@ Written as `lax.fori_loop`s of plain array operations, the solves stay inside th
 step's kernel. Measured in an RK4 scan of the n-link pendulum with the mass matrix
 derived by autodiff (`benchmarks/derivation_overhead.py`, 2-core CPU) against the
 hand-written twin that factors its closed-form M by LAPACK: n = 8 / 16, one
-trajectory 0.61 / 0.75× with these loops against 1.32 / 1.40× with LAPACK; with
-LAPACK only in the fallback branch 1.34 / 2.28×. From n = 24 the loops gain
+trajectory 0.64 / 0.77× with these loops against 1.38 / 1.50× with LAPACK, ×64
+0.92 / 1.05× against 1.51 / 1.21×; with LAPACK only in the fallback branch (a
+probe without the rest of lagjax's solve) 1.34 / 2.28×. From n = 24 the loops gain
 nothing (1.55 and 1.38× against 1.78 and 1.39× at n = 24 and 32) and they add
 compile time, so larger systems keep LAPACK (`LOOP_FACTORIZATION_LIMIT`).
 
@@ -60,27 +61,25 @@ def cholesky_by_columns(m: jax.Array) -> jax.Array:
     return jax.lax.fori_loop(0, m.shape[-1], factor_column, jnp.zeros_like(m))
 
 
-def _back_substitution(upper: jax.Array, y: jax.Array) -> jax.Array:
-    """x with U x = y for the upper triangle of `upper`."""
-    n = y.shape[-1]
+def _substitution(triangle: jax.Array, rhs: jax.Array, *, upper: bool) -> jax.Array:
+    """x with T x = rhs for the lower (forward) or upper (backward) triangle T of
+    `triangle`; the entries outside it meet only zeros of x."""
+    n = rhs.shape[-1]
 
     def solve_row(i, x):
-        k = n - 1 - i
-        row = _row(upper, k)
-        return x.at[k].set((y[k] - row @ x) / row[k])
+        # x holds zeros where it is not yet known, so a full row product reads
+        # only the solved part.
+        k = n - 1 - i if upper else i
+        row = _row(triangle, k)
+        return x.at[k].set((rhs[k] - row @ x) / row[k])
 
-    return jax.lax.fori_loop(0, n, solve_row, jnp.zeros_like(y))
+    return jax.lax.fori_loop(0, n, solve_row, jnp.zeros_like(rhs))
 
 
 def solve_by_cholesky_factor(factor: jax.Array, rhs: jax.Array) -> jax.Array:
     """x with L Lᵀ x = rhs for the lower factor L (`cholesky_by_columns`)."""
-
-    def forward(k, y):
-        row = _row(factor, k)
-        return y.at[k].set((rhs[k] - row @ y) / row[k])
-
-    y = jax.lax.fori_loop(0, rhs.shape[-1], forward, jnp.zeros_like(rhs))
-    return _back_substitution(factor.T, y)
+    y = _substitution(factor, rhs, upper=False)
+    return _substitution(factor.T, y, upper=True)
 
 
 def solve_by_pivoted_lu(m: jax.Array, rhs: jax.Array) -> tuple[jax.Array, jax.Array]:
@@ -109,4 +108,4 @@ def solve_by_pivoted_lu(m: jax.Array, rhs: jax.Array) -> tuple[jax.Array, jax.Ar
         return a - factors[:, None] * a_p[None, :], b - factors * b_p
 
     upper, y = jax.lax.fori_loop(0, n, eliminate, (m, rhs))
-    return _back_substitution(upper, y), jnp.diagonal(upper)
+    return _substitution(upper, y, upper=True), jnp.diagonal(upper)
