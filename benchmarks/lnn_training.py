@@ -74,7 +74,7 @@ import jax.numpy as jnp  # noqa: E402
 import lagjax as lj  # noqa: E402
 from benchmarks.kepler_saved import CLOCKS  # noqa: E402
 from lagjax.demo import handwritten_acceleration  # noqa: E402
-from lagjax.mechanics.euler_lagrange import _dense_system  # noqa: E402
+from lagjax.mechanics.euler_lagrange import dense_system  # noqa: E402
 from lagjax.mechanics.linalg import solve_dense  # noqa: E402
 from lagjax.neural import network_acceleration  # noqa: E402
 
@@ -132,7 +132,7 @@ def closed_form_acceleration(lagrangian, q, qdot):
 
 def lagjax_dense_acceleration(lagrangian, q, qdot):
     """lagjax's dense formulation (used above SCALAR_COORDINATE_LIMIT), LU solve."""
-    mass, rhs = _dense_system(lambda a, b, t: lagrangian(a, b), q, qdot, 0.0 * q[0])
+    mass, rhs = dense_system(lambda a, b, t: lagrangian(a, b), q, qdot, 0.0 * q[0])
     return solve_dense(mass, rhs)[0]
 
 

@@ -63,7 +63,7 @@ def partial_derivative(fn: Callable[..., jax.Array], index: int) -> Callable:
     return derivative
 
 
-def _scalar_system(lag_flat: FlatLagrangian, q, v, t):
+def scalar_system(lag_flat: FlatLagrangian, q, v, t):
     """Mass matrix (upper triangle, nested lists) and right-hand side, scalar form."""
     n = q.shape[0]
     # L of the 2n + 1 scalars (q_1..q_n, q̇_1..q̇_n, t), in pure scalar arithmetic.
@@ -92,7 +92,7 @@ def _scalar_system(lag_flat: FlatLagrangian, q, v, t):
     return mass, rhs
 
 
-def _dense_system(lag_flat: FlatLagrangian, q, v, t):
+def dense_system(lag_flat: FlatLagrangian, q, v, t):
     """Mass matrix and right-hand side as arrays."""
     momentum = jax.grad(lag_flat, argnums=1)
     mass = jax.jacfwd(momentum, argnums=1)(q, v, t)
@@ -152,21 +152,21 @@ def euler_lagrange_acceleration(
     force = None if generalized_force is None else ravel_pytree(generalized_force)[0]
     if q_flat.shape[0] <= SCALAR_COORDINATE_LIMIT:
 
-        def scalar_system():
-            mass, rhs = _scalar_system(lag_flat, q_flat, v_flat, t)
+        def build_scalar():
+            mass, rhs = scalar_system(lag_flat, q_flat, v_flat, t)
             if force is not None:
                 rhs = [r + force[i] for i, r in enumerate(rhs)]
             return mass, rhs
 
-        qddot, singular = _solve_scalar(scalar_system, poison=check == "nan")
+        qddot, singular = _solve_scalar(build_scalar, poison=check == "nan")
     else:
 
-        def dense_system():
-            mass, rhs = _dense_system(lag_flat, q_flat, v_flat, t)
+        def build_dense():
+            mass, rhs = dense_system(lag_flat, q_flat, v_flat, t)
             return mass, (rhs if force is None else rhs + force)
 
         # Without a check the verdict is discarded, so the factor is not judged.
-        qddot, singular = solve_symmetric_system(dense_system, judge=bool(check))
+        qddot, singular = solve_symmetric_system(build_dense, judge=bool(check))
     return unravel(apply_singular_check(qddot, singular, check))
 
 

@@ -40,18 +40,18 @@ from .loop_factorizations import (
     solve_by_cholesky_factor,
     solve_by_pivoted_lu,
 )
+from .unrolled_ldl import (
+    SINGULAR_EPS_FACTOR,
+    ldl_factor_unrolled,
+    ldl_solve_unrolled,
+    pivots_sound,
+)
 
 UNROLLED_SOLVE_LIMIT = 3
 
-# A matrix counts as singular when its normalised determinant (for unrolled solves)
-# or its smallest LU pivot relative to the largest (for dense solves) is below this
-# many machine epsilons per dimension: at that conditioning a float64 solve has lost
-# all its significant digits, so any result would be noise.
-_SINGULAR_EPS_FACTOR = 64.0
-
 
 def _singular_threshold(n: int, dtype) -> float:
-    return _SINGULAR_EPS_FACTOR * n * float(jnp.finfo(dtype).eps)
+    return SINGULAR_EPS_FACTOR * n * float(jnp.finfo(dtype).eps)
 
 
 def _cofactor_inverse(
@@ -319,42 +319,6 @@ def solve_symmetric(m: jax.Array, rhs: jax.Array) -> tuple[jax.Array, jax.Array]
     return solve_symmetric_system(lambda: (m, rhs))
 
 
-def _unrolled_ldl_solve(
-    m: list[list[jax.Array]], rhs: list[jax.Array]
-) -> tuple[list[jax.Array], list[jax.Array]]:
-    """x from M = L D Lᵀ without pivoting, in scalars, and the pivots D (raw).
-
-    Only the upper triangle of `m` is read. A pivot that is not positive is
-    replaced by 1 before it divides anything, so the answer stays finite (and its
-    derivatives NaN-free) where it will be discarded.
-    """
-    n = len(rhs)
-    lower: list[list[jax.Array]] = [[] for _ in range(n)]  # lower[i][k], k < i
-    raw, pivots = [], []
-    for j in range(n):
-        pivot = m[j][j]
-        for k in range(j):
-            pivot = pivot - lower[j][k] * lower[j][k] * pivots[k]
-        raw.append(pivot)
-        pivots.append(jnp.where(pivot > 0, pivot, jnp.ones_like(pivot)))
-        for i in range(j + 1, n):
-            entry = m[j][i]
-            for k in range(j):
-                entry = entry - lower[i][k] * lower[j][k] * pivots[k]
-            lower[i].append(entry / pivots[j])
-    y = []
-    for i in range(n):
-        value = rhs[i]
-        for k in range(i):
-            value = value - lower[i][k] * y[k]
-        y.append(value)
-    x: list[jax.Array] = [y[i] / pivots[i] for i in range(n)]
-    for i in reversed(range(n)):
-        for k in range(i + 1, n):
-            x[i] = x[i] - lower[k][i] * x[k]
-    return x, raw
-
-
 def solve_unrolled_symmetric(
     m: list[list[jax.Array]],
     rhs: list[jax.Array],
@@ -376,12 +340,9 @@ def solve_unrolled_symmetric(
     from 0.27× to 1.9× its hand-written twin (`benchmarks/derivation_overhead.py`).
     """
     n = len(rhs)
-    x, raw = _unrolled_ldl_solve(m, rhs)
-    smallest, largest = raw[0], raw[0]
-    for pivot in raw[1:]:
-        smallest, largest = jnp.minimum(smallest, pivot), jnp.maximum(largest, pivot)
-    sound = smallest > _singular_threshold(n, jnp.result_type(smallest)) * largest
-    by_ldl = jnp.stack(x)
+    factor = ldl_factor_unrolled(m)
+    sound = pivots_sound(factor)
+    by_ldl = jnp.stack(ldl_solve_unrolled(factor, rhs))
 
     def with_lu():
         upper, vector = (m, rhs) if system is None else system()
