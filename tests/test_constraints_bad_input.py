@@ -17,10 +17,30 @@ def squared_length(q):
     return 0.5 * (q[0] ** 2 + q[1] ** 2 - 1.0)
 
 
-def test_rank_deficient_jacobian_at_the_state_raises_inside_jit():
+def test_rank_deficient_jacobian_at_the_state_raises_on_values():
     lag = lj.Lagrangian(free_particle, constraints=squared_length)
     with pytest.raises(Exception, match="rank-deficient"):
-        jax.block_until_ready(jax.jit(lag.acceleration)(jnp.zeros(2), jnp.zeros(2)))
+        jax.block_until_ready(lag.acceleration(jnp.zeros(2), jnp.zeros(2)))
+
+
+def test_rank_deficient_jacobian_inside_jit_poisons_by_default_and_raises_on_request():
+    # Under a trace the default verdict is NaN (one select in a fused step), never
+    # a finite acceleration; check=True keeps the run-time error inside jit.
+    lag = lj.Lagrangian(free_particle, constraints=squared_length)
+    qddot = jax.jit(lag.acceleration)(jnp.zeros(2), jnp.zeros(2))
+    assert bool(jnp.all(jnp.isnan(qddot)))
+    checked = jax.jit(lambda q, v: lag.acceleration(q, v, check=True))
+    with pytest.raises(Exception, match="rank-deficient"):
+        jax.block_until_ready(checked(jnp.zeros(2), jnp.zeros(2)))
+
+
+def test_regular_constraints_inside_jit_are_not_poisoned():
+    # On the unit circle at (1, 0) moving at 0.5 along y: the rod's pull gives the
+    # centripetal −v²/r along x, and gravity is all tangential there.
+    lag = lj.Lagrangian(free_particle, constraints=squared_length)
+    q, v = jnp.array([1.0, 0.0]), jnp.array([0.0, 0.5])
+    traced = jax.jit(lag.acceleration)(q, v)
+    assert jnp.allclose(traced, jnp.array([-0.25, -9.81]), rtol=0, atol=1e-13)
 
 
 def test_redundant_constraints_raise():

@@ -236,13 +236,15 @@ def constrained_motion(
     args: Any,
     free_acceleration: Any,
     *,
-    check: bool,
+    check: bool | str,
 ) -> tuple[Any, jax.Array, Any]:
     """(q̈, λ, Aᵀλ) from the unconstrained (free) acceleration of `lagrangian`.
 
-    `check=True` raises a run-time error when the saddle-point matrix is singular
-    (rank-deficient constraint Jacobian); with False that case gives inf/NaN or
-    noise, which `simulate`'s projection step reports.
+    `check` is the verdict on a singular saddle-point matrix (rank-deficient
+    constraint Jacobian), as for the mass matrix in `Lagrangian.acceleration`:
+    True raises a run-time error (`eqx.error_if`, a branch per call), `"nan"`
+    makes q̈, λ and Aᵀλ NaN (one select, which stays in a fused step), False
+    leaves inf/NaN or noise, which `simulate`'s projection step reports.
     """
     constraints = lagrangian.constraints
     assert constraints is not None
@@ -252,10 +254,21 @@ def constrained_motion(
     target = constraints.acceleration_target(q, qdot, t, args) - jacobian @ free_flat
     mass = lagrangian.mass_matrix(q, qdot, t, args)
     correction, multipliers, singular = least_correction(mass, jacobian, target)
-    if check:
-        correction = raise_if_rank_deficient(correction, singular)
+    correction, multipliers = apply_rank_check(
+        (correction, multipliers), singular, check
+    )
     force = unravel(jacobian.T @ multipliers)
     return unravel(free_flat + correction), multipliers, force
+
+
+def apply_rank_check(x: Any, singular: jax.Array, check: bool | str) -> Any:
+    """`check`'s verdict on a singular saddle-point matrix: every leaf of `x` NaN
+    ("nan"), a run-time error (True), or nothing (False)."""
+    if check == "nan":
+        return jax.tree_util.tree_map(lambda a: jnp.where(singular, jnp.nan, a), x)
+    if check:
+        return raise_if_rank_deficient(x, singular)
+    return x
 
 
 def raise_if_rank_deficient(x: Any, singular: jax.Array) -> Any:

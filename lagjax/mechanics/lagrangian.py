@@ -34,6 +34,7 @@ from .euler_lagrange import euler_lagrange_acceleration
 from .functions import as_system_function
 from .legendre import tree_dot
 from .network_formulation import holds_network, network_euler_lagrange_acceleration
+from .scalar_constraints import scalar_constrained_motion, scalar_constraints_apply
 from .signature import (
     call_with_arity,
     check_same_structure,
@@ -177,8 +178,9 @@ class Lagrangian(AbstractSystem):
     ) -> Any:
         """q̈ from the Euler–Lagrange equations (see `euler_lagrange_acceleration`).
 
-        A singular mass matrix is never a finite wrong number. By default (`check`
-        None) a call on concrete values raises a clear error, and a call under a
+        A singular mass matrix — or, with constraints, a singular saddle-point
+        matrix (redundant or degenerate constraints) — is never a finite wrong
+        number. By default (`check` None) a call on concrete values raises a clear error, and a call under a
         trace — inside `jit`, `vmap` or an integration loop — returns NaN instead,
         a test that costs one fused select rather than a branch that splits the
         step (hand-written speed; `benchmarks/derivation_overhead.py`); check the
@@ -189,10 +191,9 @@ class Lagrangian(AbstractSystem):
         check_same_structure(q, qdot, "q", "qdot")
         check = singular_check(check, q, qdot, t)
         self(q, qdot, t, args)  # trace-time checks of L's output; no run-time cost
-        free = self._free_acceleration(q, qdot, t, args, check=check)
         if self.constraints is None:
-            return free
-        return constrained_motion(self, q, qdot, t, args, free, check=bool(check))[0]
+            return self._free_acceleration(q, qdot, t, args, check=check)
+        return self._constrained_motion(q, qdot, t, args, check=check)[0]
 
     def multipliers(
         self, q: Any, qdot: Any, t: Any = 0.0, args: Any = None
@@ -206,12 +207,19 @@ class Lagrangian(AbstractSystem):
         """The generalized constraint force Aᵀλ (structure of `q`)."""
         return self._constrained_motion(q, qdot, t, args)[2]
 
-    def _constrained_motion(self, q, qdot, t, args):
+    def _constrained_motion(self, q, qdot, t, args, *, check: bool | str = True):
+        """(q̈, λ, Aᵀλ): in scalar form for a few coordinates, else dense."""
         if self.constraints is None:
             raise ValueError("this Lagrangian has no constraints")
         check_same_structure(q, qdot, "q", "qdot")
-        free = self._free_acceleration(q, qdot, t, args, check=True)
-        return constrained_motion(self, q, qdot, t, args, free, check=True)
+        if self.formulation != "network" and scalar_constraints_apply(q):
+            force = self.generalized_force(q, qdot, t, args)
+            return scalar_constrained_motion(
+                self._call_unchecked, self.constraints, q, qdot, t, args, force,
+                check=check,
+            )  # fmt: skip
+        free = self._free_acceleration(q, qdot, t, args, check=check)
+        return constrained_motion(self, q, qdot, t, args, free, check=check)
 
     def _free_acceleration(self, q, qdot, t, args, *, check):
         """q̈ without constraint forces, by this Lagrangian's `formulation`."""

@@ -1,0 +1,137 @@
+"""Constrained accelerations in the scalar formulation (few coordinates) and its
+dense fallback: physics answers, extra decoupled coordinates, hard matrices."""
+
+import jax
+import jax.numpy as jnp
+import pytest
+
+import lagjax as lj
+from lagjax.demo import G, handwritten_acceleration
+from tests.helpers import relative_close
+
+
+def cartesian_double_pendulum(q, qdot):
+    return 0.5 * jnp.sum(qdot[:4] ** 2) - G * (q[1] + q[3])
+
+
+def rods(q):
+    return jnp.stack(
+        [q[0] ** 2 + q[1] ** 2 - 1.0, (q[2] - q[0]) ** 2 + (q[3] - q[1]) ** 2 - 1.0]
+    )
+
+
+def with_free_oscillators(q, qdot):
+    # Three decoupled unit oscillators after the pendulum: 7 coordinates, past the
+    # scalar formulation's limit, so the dense saddle-point solve answers.
+    return cartesian_double_pendulum(q, qdot) + 0.5 * jnp.sum(
+        qdot[4:] ** 2 - q[4:] ** 2
+    )
+
+
+def cartesian_state(theta, omega):
+    """Cartesian (q, q̇) of the unit double pendulum at absolute angles θ."""
+    s, c = jnp.sin(theta), jnp.cos(theta)
+    q = jnp.stack([s[0], -c[0], s[0] + s[1], -c[0] - c[1]])
+    qdot = jnp.stack(
+        [
+            c[0] * omega[0],
+            s[0] * omega[0],
+            c[0] * omega[0] + c[1] * omega[1],
+            s[0] * omega[0] + s[1] * omega[1],
+        ]
+    )
+    return q, qdot
+
+
+def cartesian_acceleration(theta, omega, alpha):
+    """Second derivatives of the Cartesian positions for angles θ(t)."""
+    s, c = jnp.sin(theta), jnp.cos(theta)
+    ax = c * alpha - s * omega**2
+    ay = s * alpha + c * omega**2
+    return jnp.stack([ax[0], ay[0], ax[0] + ax[1], ay[0] + ay[1]])
+
+
+THETA, OMEGA = jnp.array([0.9, -0.4]), jnp.array([1.1, -2.3])
+
+
+def test_cartesian_double_pendulum_matches_the_angle_equations():
+    lag = lj.Lagrangian(cartesian_double_pendulum, constraints=rods)
+    q, qdot = cartesian_state(THETA, OMEGA)
+    expected = cartesian_acceleration(
+        THETA, OMEGA, handwritten_acceleration(THETA, OMEGA)
+    )
+    assert relative_close(lag.acceleration(q, qdot), expected, 1e-13)
+    assert relative_close(jax.jit(lag.acceleration)(q, qdot), expected, 1e-13)
+
+
+def test_decoupled_coordinates_change_nothing_on_either_formulation():
+    lag = lj.Lagrangian(with_free_oscillators, constraints=rods)
+    q4, qdot4 = cartesian_state(THETA, OMEGA)
+    extra = jnp.array([0.3, -0.2, 0.5])
+    q, qdot = jnp.concatenate([q4, extra]), jnp.concatenate([qdot4, jnp.zeros(3)])
+    expected = cartesian_acceleration(
+        THETA, OMEGA, handwritten_acceleration(THETA, OMEGA)
+    )
+    qddot = lag.acceleration(q, qdot)
+    assert relative_close(qddot[:4], expected, 1e-13)
+    assert relative_close(qddot[4:], -extra, 1e-14)
+    four = lj.Lagrangian(cartesian_double_pendulum, constraints=rods)
+    assert relative_close(lag.multipliers(q, qdot), four.multipliers(q4, qdot4), 1e-13)
+
+
+def test_indefinite_mass_matrix_with_a_regular_saddle_is_still_solved():
+    # M = diag(1, −1) has no LDLᵀ with positive pivots, but the constraint y = 0
+    # leaves only x free, where M is positive: the motion is ẍ = −x.
+    def lagrangian(q, qdot):
+        return 0.5 * (qdot[0] ** 2 - qdot[1] ** 2) - 0.5 * q[0] ** 2
+
+    lag = lj.Lagrangian(lagrangian, constraints=lambda q: q[1])
+    q, qdot = jnp.array([0.7, 0.0]), jnp.array([0.2, 0.0])
+    expected = jnp.array([-0.7, 0.0])
+    assert relative_close(lag.acceleration(q, qdot), expected, 1e-14)
+    assert relative_close(jax.jit(lag.acceleration)(q, qdot), expected, 1e-14)
+
+
+def squared_length(q):
+    return 0.5 * (q[0] ** 2 + q[1] ** 2 - 1.0)
+
+
+def falling(q, qdot):
+    return 0.5 * jnp.sum(qdot**2) - 9.81 * q[1]
+
+
+def test_a_batch_with_one_degenerate_member_poisons_only_that_member():
+    lag = lj.Lagrangian(falling, constraints=squared_length)
+    q = jnp.array([[1.0, 0.0], [0.0, 0.0], [0.0, -1.0]])
+    qdot = jnp.array([[0.0, 0.5], [0.0, 0.0], [2.0, 0.0]])
+    qddot = jax.jit(jax.vmap(lag.acceleration))(q, qdot)
+    assert relative_close(qddot[0], jnp.array([-0.25, -9.81]), 1e-13)
+    assert bool(jnp.all(jnp.isnan(qddot[1])))
+    # At the bottom, moving at 2: centripetal 4 upwards, gravity balanced by the rod.
+    assert relative_close(qddot[2], jnp.array([0.0, 4.0]), 1e-13)
+
+
+def test_singular_mass_matrix_is_named_with_constraints():
+    def lagrangian(q, qdot):  # no kinetic term for y
+        return 0.5 * qdot[0] ** 2 - q[1] ** 2
+
+    lag = lj.Lagrangian(lagrangian, constraints=lambda q: q[0] - q[1])
+    q, qdot = jnp.array([0.5, 0.5]), jnp.zeros(2)
+    with pytest.raises(Exception, match="mass matrix"):
+        jax.block_until_ready(lag.acceleration(q, qdot))
+    assert bool(jnp.all(jnp.isnan(jax.jit(lag.acceleration)(q, qdot))))
+
+
+def test_derivatives_of_the_constrained_acceleration_are_finite_differences():
+    lag = lj.Lagrangian(cartesian_double_pendulum, constraints=rods)
+
+    def accel_of_angle(theta0):
+        q, qdot = cartesian_state(jnp.stack([theta0, THETA[1]]), OMEGA)
+        return lag.acceleration(q, qdot)
+
+    derivative = jax.jacfwd(accel_of_angle)(THETA[0])
+    gradient = jax.grad(lambda a: jnp.sum(accel_of_angle(a)))(THETA[0])
+    h = 1e-6
+    central = (accel_of_angle(THETA[0] + h) - accel_of_angle(THETA[0] - h)) / (2 * h)
+    assert relative_close(derivative, central, 1e-7)
+    assert relative_close(gradient, jnp.sum(central), 1e-7)
