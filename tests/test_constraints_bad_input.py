@@ -100,3 +100,16 @@ def test_solvers_that_would_ignore_the_constraints_are_refused(solver):
     y0 = (jnp.array([1.0, 0.0]), jnp.zeros(2))
     with pytest.raises(ValueError, match="does not enforce constraints"):
         lj.simulate(lag, y0, t1=0.1, dt=0.01, solver=solver)
+
+
+def test_projection_onto_degenerate_constraints_raises_on_values_and_poisons_in_jit():
+    from lagjax.solvers.projection import project_onto_constraints
+
+    lag = lj.Lagrangian(free_particle, constraints=squared_length)
+    q, qdot = jnp.zeros(2), jnp.array([0.3, 0.0])
+    with pytest.raises(Exception, match="rank-deficient"):
+        jax.block_until_ready(project_onto_constraints(lag, q, qdot, 0.0, None))
+    (_, projected), _ = jax.jit(
+        lambda q, v: project_onto_constraints(lag, q, v, 0.0, None)
+    )(q, qdot)
+    assert bool(jnp.all(jnp.isnan(projected)))

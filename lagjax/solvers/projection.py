@@ -41,8 +41,8 @@ import jax.numpy as jnp
 import optimistix as optx
 from jax.flatten_util import ravel_pytree
 
-from lagjax.mechanics.constraints import least_correction, raise_if_rank_deficient
-from lagjax.mechanics.lagrangian import Lagrangian
+from lagjax.mechanics.constraints import apply_rank_check, least_correction
+from lagjax.mechanics.lagrangian import Lagrangian, singular_check
 from lagjax.mechanics.linalg import solve_dense
 from lagjax.precision import match_dtypes, newton_for
 from lagjax.terms import ConstrainedLagrangianTerm, unwrap_term
@@ -141,12 +141,17 @@ def project_onto_constraints(
     rtol: float = 1e-14,
     atol: float = 1e-14,
     max_steps: int = 16,
+    check: bool | str | None = None,
 ) -> tuple[tuple[Any, Any], diffrax.RESULTS]:
     """`(q, q̇)` moved onto the constraint manifold of `lagrangian` at time t.
 
-    Raises a run-time error when the constraint Jacobian is rank-deficient there.
+    When the constraint Jacobian is rank-deficient there, `check` decides as in
+    `Lagrangian.acceleration`: by default an error on concrete values and NaN
+    velocities under a trace (one select; a run-time error branch at every step
+    of a loop would split its fused step), True an error also under `jit`.
     Returns the projected state and whether the position Newton solve converged.
     """
+    check = singular_check(check, q, qdot, t)
     newton = newton_for(ravel_pytree(q)[0].dtype, rtol, atol)
     q, result = _project_positions(lagrangian, q, qdot, t, args, newton, max_steps)
     qdot, singular = _project_velocities(lagrangian, q, qdot, t, args)
@@ -154,7 +159,7 @@ def project_onto_constraints(
     # velocity step's singularity test would not see.
     leaves = jax.tree_util.tree_leaves((q, qdot))
     finite = jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in leaves]))
-    qdot = raise_if_rank_deficient(qdot, singular | ~finite)
+    qdot = apply_rank_check(qdot, singular | ~finite, check)
     return (q, qdot), diffrax.RESULTS.promote(result)
 
 
@@ -192,4 +197,5 @@ class ConstraintProjection(AbstractProjectedSolver):
             args,
             rtol=self.rtol,
             atol=self.atol,
+            check="nan",  # simulate names the non-finite state after the loop
         )
