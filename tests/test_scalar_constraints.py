@@ -135,3 +135,33 @@ def test_derivatives_of_the_constrained_acceleration_are_finite_differences():
     central = (accel_of_angle(THETA[0] + h) - accel_of_angle(THETA[0] - h)) / (2 * h)
     assert relative_close(derivative, central, 1e-7)
     assert relative_close(gradient, jnp.sum(central), 1e-7)
+
+
+def unequal_masses(q, qdot):
+    return 0.5 * (qdot[0] ** 2 + 3.0 * qdot[1] ** 2)
+
+
+@pytest.mark.parametrize(
+    "constraints, qdot, expected",
+    [
+        # x + y = 1 (holonomic): δ = M⁻¹Aᵀλ with λ(1/1 + 1/3) = −1.
+        (lambda q: q[0] + q[1] - 1.0, [1.0, 0.0], [0.25, -0.25]),
+        # ẋ − 2ẏ = 0 (velocity only): λ(1/1 + 4/3) = 1.
+        (
+            lj.Constraints(velocity=lambda q, qd: qd[0] - 2.0 * qd[1]),
+            [1.0, 1.0],
+            [10 / 7, 5 / 7],
+        ),
+    ],
+)
+def test_velocity_projection_is_the_least_change_in_the_kinetic_metric(
+    constraints, qdot, expected
+):
+    from lagjax.solvers.projection import project_onto_constraints
+
+    lag = lj.Lagrangian(unequal_masses, constraints=constraints)
+    q = jnp.array([0.4, 0.6])
+    (_, projected), _ = jax.jit(
+        lambda v: project_onto_constraints(lag, q, v, 0.0, None)
+    )(jnp.array(qdot))
+    assert relative_close(projected, jnp.array(expected), 1e-14)

@@ -93,12 +93,13 @@ def _position_values(constraints, unravel, q, t, args) -> list[jax.Array]:
 
 
 def _constraint_rows(constraints: Constraints, unravel, q, v, t, args, k):
-    """(A as k lists of n scalars, the right-hand side of A q̈ = target)."""
+    """(A as k lists of n scalars, the residuals c, the right-hand side of
+    A q̈ = target)."""
     n = q.shape[0]
     z = (*(q[i] for i in range(n)), *(v[i] for i in range(n)), t)
     rate = constraints.baumgarte_rate
     positions = _position_values(constraints, unravel, q, t, args) if rate else []
-    jacobian, target = [], []
+    jacobian, values, target = [], [], []
     for i, residual in enumerate(
         _residual_rows(constraints, unravel, q, v, t, args, k)
     ):
@@ -116,8 +117,9 @@ def _constraint_rows(constraints: Constraints, unravel, q, v, t, args, k):
             goal = goal - 2 * rate * value - rate**2 * positions[i]
         elif rate:  # ċ + αc = 0
             goal = goal - rate * value
+        values.append(value)
         target.append(goal)
-    return jacobian, target
+    return jacobian, values, target
 
 
 def _dot(a: list[jax.Array], b: list[jax.Array]) -> jax.Array:
@@ -188,7 +190,7 @@ def _solve(lagrangian, constraints, q, qdot, t, args, force):
     mass, rhs = scalar_system(lag_flat, q_flat, v_flat, t)
     if force_flat is not None:
         rhs = [r + force_flat[i] for i, r in enumerate(rhs)]
-    jacobian, target = _constraint_rows(
+    jacobian, _, target = _constraint_rows(
         constraints, unravel, q_flat, v_flat, t, args, k
     )
     qddot, multipliers, constraint_force, sound = _schur_solve(
@@ -217,3 +219,38 @@ def _solve(lagrangian, constraints, q, qdot, t, args, force):
         return (*fast, no, no)
 
     return jax.lax.cond(any_in_batch(~sound), by_saddle_lu, as_computed)
+
+
+def scalar_velocity_correction(
+    lagrangian: Callable, constraints: Constraints, q: Any, qdot: Any, t: Any, args: Any
+) -> tuple[Any, jax.Array]:
+    """`(q̇ + δ, singular)`: the least δ in the metric M with c(q, q̇ + δ, t) = 0.
+
+    c is linear in q̇, so δ = M⁻¹Aᵀλ with (A M⁻¹Aᵀ)λ = −c(q, q̇, t): the Schur
+    complement solve above with a zero free acceleration, in scalar form; the
+    dense saddle-point LU (`least_correction`) when a pivot is unsound.
+    """
+    k = jax.eval_shape(constraints.velocity_residual, q, qdot, t, args).shape[0]
+    lag_flat, q_flat, v_flat, t, unravel = flat_lagrangian(lagrangian, q, qdot, t, args)
+    mass, _ = scalar_system(lag_flat, q_flat, v_flat, t)
+    jacobian, values, _ = _constraint_rows(
+        constraints, unravel, q_flat, v_flat, t, args, k
+    )
+    zeros = [jnp.zeros_like(t)] * q_flat.shape[0]
+    delta, _, _, sound = _schur_solve(mass, zeros, jacobian, [-c for c in values])
+    fast = v_flat + jnp.stack(delta)
+
+    def by_saddle_lu():
+        dense_mass, _ = dense_system(lag_flat, q_flat, v_flat, t)
+        dense_jacobian = constraints.jacobian(q, t, args)
+        residual = constraints.velocity_residual(q, qdot, t, args)
+        correction, _, singular = least_correction(
+            dense_mass, dense_jacobian, -residual
+        )
+        return jnp.where(sound, fast, v_flat + correction), ~sound & singular
+
+    def as_computed():
+        return fast, jnp.zeros((), dtype=bool)
+
+    corrected, singular = jax.lax.cond(any_in_batch(~sound), by_saddle_lu, as_computed)
+    return unravel(corrected), singular

@@ -44,6 +44,10 @@ from jax.flatten_util import ravel_pytree
 from lagjax.mechanics.constraints import apply_rank_check, least_correction
 from lagjax.mechanics.lagrangian import Lagrangian, singular_check
 from lagjax.mechanics.linalg import solve_dense
+from lagjax.mechanics.scalar_constraints import (
+    scalar_constraints_apply,
+    scalar_velocity_correction,
+)
 from lagjax.precision import match_dtypes, newton_for
 from lagjax.terms import ConstrainedLagrangianTerm, unwrap_term
 
@@ -123,6 +127,8 @@ def _project_velocities(lagrangian, q, qdot, t, args):
     Returns `(qdot, singular)`; c is linear in q̇, so one solve is exact.
     """
     constraints = lagrangian.constraints
+    if lagrangian.formulation != "network" and scalar_constraints_apply(q):
+        return scalar_velocity_correction(lagrangian, constraints, q, qdot, t, args)
     qdot_flat, unravel = ravel_pytree(qdot)
     mass = lagrangian.mass_matrix(q, qdot, t, args)
     jacobian = constraints.jacobian(q, t, args)
