@@ -4,9 +4,11 @@ Double pendulum (m = l = 1, g = 9.81), 10⁴ fixed RK4 steps inside `jax.lax.sca
 single trajectory and vmapped over a batch of initial states. The right-hand side is
 (a) the hand-written equations of motion, or (b) `lj.Lagrangian(L).acceleration` for
 L written two ways a user would write it: with indexing (`q[0]`, `q[1]`) and in
-matrix form (`qd @ M(q) @ qd`), with `check=False` as integration loops call it, and
-once with the default `check=True` (a run-time singular-mass-matrix branch per call). Compile time is reported apart from run time; run
-time is the median of repeats after a warm-up, with `block_until_ready`.
+matrix form (`qd @ M(q) @ qd`), with `check=False` as integration loops call it,
+with the default (under a trace a singular mass matrix makes q̈ NaN, one select),
+and with `check=True` (a run-time singular-mass-matrix branch per call). Compile
+time is reported apart from run time; run time is the median of repeats after a
+warm-up, with `block_until_ready`.
 
 n-link pendulum (unit masses and rods), L written vector-style with `jnp.cumsum`
 over the link velocities, 2·10³ RK4 steps, single and vmapped over 64 states: the
@@ -290,7 +292,8 @@ def double_pendulum_rows(options) -> None:
         "hand-written": handwritten_acceleration,
         "L with q[0] indexing": partial(indexed.acceleration, check=False),
         "L as qd @ M(q) @ qd": partial(matrix.acceleration, check=False),
-        "q[0] indexing, check=True": indexed.acceleration,
+        "q[0] indexing, default": indexed.acceleration,
+        "q[0] indexing, check=True": partial(indexed.acceleration, check=True),
     }
     reference_state = None
     baseline: dict[str, float] = {}
