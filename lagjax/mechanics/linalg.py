@@ -80,8 +80,9 @@ def solve_unrolled(
     """Solve a symmetric n ≤ 3 system given as lists of scalars.
 
     Only the upper triangle of `m` is read. Returns `(x, singular)`. With `poison`,
-    a singular matrix makes x NaN: the determinant is replaced before the division,
-    one scalar select that stays inside the fused kernel.
+    a singular matrix makes x NaN: one scalar select per entry, after the
+    division, off the determinant's path to it (a select on the determinant
+    lengthened the step's dependency chain).
     """
     n = len(rhs)
     if n > UNROLLED_SOLVE_LIMIT:
@@ -98,9 +99,9 @@ def solve_unrolled(
         diagonal_product = diagonal_product * m[i][i]
     threshold = _singular_threshold(n, jnp.result_type(det))
     singular = jnp.abs(det) <= threshold * jnp.abs(diagonal_product)
-    if poison:
-        det = jnp.where(singular, jnp.nan, det)
     x = [sum(adj[i][j] * rhs[j] for j in range(n)) / det for i in range(n)]
+    if poison:
+        x = [jnp.where(singular, jnp.nan, xi) for xi in x]
     return x, singular
 
 
