@@ -27,3 +27,18 @@ def relative_close(actual, expected, rtol: float) -> bool:
     actual, expected = np.asarray(actual), np.asarray(expected)
     scale = max(float(np.max(np.abs(expected))), np.finfo(float).tiny)
     return float(np.max(np.abs(actual - expected))) <= rtol * scale
+
+
+def assert_singular_verdicts(lagrangian, q, qdot, match: str) -> None:
+    """The default contract of `acceleration` at a state where it is undefined: an
+    error on values, NaN under `jit` (no branch in a fused step), and an error
+    under `jit` with check=True."""
+    import pytest
+
+    with pytest.raises(Exception, match=match):
+        jax.block_until_ready(lagrangian.acceleration(q, qdot))
+    traced = jax.jit(lagrangian.acceleration)(q, qdot)
+    assert bool(jnp.all(jnp.isnan(traced)))
+    checked = jax.jit(lambda a, b: lagrangian.acceleration(a, b, check=True))
+    with pytest.raises(Exception, match=match):
+        jax.block_until_ready(checked(q, qdot))
