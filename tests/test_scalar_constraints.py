@@ -1,6 +1,7 @@
 """Constrained accelerations in the scalar formulation (few coordinates) and its
 dense fallback: physics answers, extra decoupled coordinates, hard matrices."""
 
+import diffrax
 import jax
 import jax.numpy as jnp
 import pytest
@@ -165,3 +166,32 @@ def test_velocity_projection_is_the_least_change_in_the_kinetic_metric(
         lambda v: project_onto_constraints(lag, q, v, 0.0, None)
     )(jnp.array(qdot))
     assert relative_close(projected, jnp.array(expected), 1e-14)
+
+
+def test_position_projection_far_off_the_circle_converges_by_the_fallback():
+    # 10 % off the unit circle: two simplified Newton iterations leave a defect of
+    # ~1e-4, so optimistix's Newton finishes; the closest point in the metric
+    # M = I along Gᵀ = q is q/|q|.
+    from lagjax.solvers.projection import project_onto_constraints
+
+    lag = lj.Lagrangian(falling, constraints=squared_length)
+    q = 1.1 * jnp.array([0.6, -0.8])
+    project = jax.jit(
+        lambda q: project_onto_constraints(lag, q, jnp.zeros(2), 0.0, None)
+    )
+    (moved, _), result = project(q)
+    assert result == diffrax.RESULTS.successful
+    assert relative_close(moved, jnp.array([0.6, -0.8]), 1e-14)
+
+
+def test_simulate_with_an_indefinite_mass_matrix_takes_every_fallback():
+    # M = diag(1, −1) (no LDLᵀ with positive pivots), y = 0: ẍ = −x, x = cos t.
+    def lagrangian(q, qdot):
+        return 0.5 * (qdot[0] ** 2 - qdot[1] ** 2) - 0.5 * q[0] ** 2
+
+    lag = lj.Lagrangian(lagrangian, constraints=lambda q: q[1])
+    run = lj.simulate(
+        lag, (jnp.array([1.0, 0.0]), jnp.zeros(2)), t1=2.0, dt=0.01,
+        solver=diffrax.Tsit5(),
+    )  # fmt: skip
+    assert relative_close(run.q[-1], jnp.array([jnp.cos(2.0), 0.0]), 1e-9)

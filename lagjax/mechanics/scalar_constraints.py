@@ -254,3 +254,64 @@ def scalar_velocity_correction(
 
     corrected, singular = jax.lax.cond(any_in_batch(~sound), by_saddle_lu, as_computed)
     return unravel(corrected), singular
+
+
+# Simplified Newton iterations of the position projection before its verdict: the
+# defect after a step is of the size of the local error, and each iteration squares
+# it (relative to the constraint's scale), so two reach round-off.
+POSITION_ITERATIONS = 2
+
+
+def scalar_position_projection(
+    lagrangian: Callable,
+    constraints: Constraints,
+    q: Any,
+    qdot: Any,
+    t: Any,
+    args: Any,
+    *,
+    rtol: float,
+    atol: float,
+) -> tuple[Any, jax.Array]:
+    """`(q + M⁻¹Gᵀν, converged)` with g(q + M⁻¹Gᵀν, t) = 0, in scalar form.
+
+    ν by simplified Newton with the Jacobian frozen at ν = 0, where it is the
+    positive definite G M⁻¹Gᵀ (Hairer, Lubich & Wanner §IV.4):
+    Δν = −(G M⁻¹Gᵀ)⁻¹ g(q + M⁻¹Gᵀν, t), `POSITION_ITERATIONS` times, unrolled, so
+    that the projection fuses into the step. `converged` is false when the last
+    update is above `atol + rtol·|ν|` in some component or a pivot of M or of
+    G M⁻¹Gᵀ is unsound; the caller then solves again by `optimistix.Newton`.
+    """
+    k_h = jax.eval_shape(constraints.position_residual, q, t, args).shape[0]
+    lag_flat, q_flat, v_flat, t, unravel = flat_lagrangian(lagrangian, q, qdot, t, args)
+    n = q_flat.shape[0]
+    mass, _ = scalar_system(lag_flat, q_flat, v_flat, t)
+
+    def row(i):
+        def residual(qf, tt):
+            return constraints.position_residual(unravel(qf), tt, args)[i]
+
+        return scalar_argument_function(residual, q_flat, t)
+
+    rows = [row(i) for i in range(k_h)]
+    start = [q_flat[m] for m in range(n)]
+    jacobian = [[partial_derivative(g, j)(*start, t) for j in range(n)] for g in rows]
+    factor = ldl_factor_unrolled(mass)
+    directions = [ldl_solve_unrolled(factor, g_row) for g_row in jacobian]
+    schur = [
+        [_dot(jacobian[i], directions[j]) if j >= i else None for j in range(k_h)]
+        for i in range(k_h)
+    ]
+    schur_factor = ldl_factor_unrolled(schur)
+    by_coordinate = [[directions[j][m] for j in range(k_h)] for m in range(n)]
+    nu = [jnp.zeros_like(t)] * k_h
+    position, update = start, nu
+    for _ in range(POSITION_ITERATIONS):
+        defect = [g(*position, t) for g in rows]
+        update = ldl_solve_unrolled(schur_factor, [-d for d in defect])
+        nu = [a + b for a, b in zip(nu, update)]
+        position = [start[m] + _dot(by_coordinate[m], nu) for m in range(n)]
+    converged = pivots_sound(factor) & pivots_sound(schur_factor)
+    for step, total in zip(update, nu):
+        converged = converged & (jnp.abs(step) <= atol + rtol * jnp.abs(total))
+    return unravel(jnp.stack(position)), converged
