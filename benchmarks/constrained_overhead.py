@@ -16,6 +16,11 @@ is measured with its default arguments (under a trace a singular saddle matrix
 makes q̈ NaN, one select), with `check=True` (a run-time error branch per call)
 and with `check=False` (no test).
 
+Then `lj.simulate` as users run it (Tsit5, fixed steps, projected onto the
+constraints after every step, `lagjax.solvers.projection`) against diffrax's Tsit5
+on the hand-written equations *without* projection — a lower bound, not a twin:
+its constraint residual drifts, which the table shows beside the time.
+
 Run: `python -m benchmarks.constrained_overhead [--steps 2000] [--batch 64]
 [--repeats 7] [--clock cpu]`.
 """
@@ -23,12 +28,14 @@ Run: `python -m benchmarks.constrained_overhead [--steps 2000] [--batch 64]
 from __future__ import annotations
 
 import argparse
+import statistics
 from functools import partial
 
 import jax
 
 jax.config.update("jax_enable_x64", True)
 
+import diffrax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 
 import lagjax as lj  # noqa: E402
@@ -121,6 +128,44 @@ def main() -> None:
             for a, b in zip(final[name], final["hand-written"])
         )
         print(f"{'':22s} max |state − hand-written state|: {difference:.1e}")
+    simulate_rows(options.steps, options.repeats, CLOCKS[options.clock])
+
+
+def simulate_rows(steps: int, repeats: int, clock) -> None:
+    """`lj.simulate` (projected Tsit5) against unprojected Tsit5 on the hand-written
+    equations, one trajectory, dt = 1e-3."""
+    lagrangian = lj.Lagrangian(cartesian_lagrangian, constraints=rods)
+    dt, y0 = 1e-3, (start(0.5, 0.9), jnp.zeros(4))
+
+    def projected(y):
+        run = lj.simulate(lagrangian, y, t1=steps * dt, dt=dt, solver=diffrax.Tsit5())
+        return run.q[-1]
+
+    @jax.jit
+    def unprojected(y):
+        term = diffrax.ODETerm(lambda t, y, a: (y[1], handwritten_acceleration(*y)))
+        solution = diffrax.diffeqsolve(
+            term, diffrax.Tsit5(), 0.0, steps * dt, dt, y, max_steps=steps + 1
+        )
+        return solution.ys[0][-1]
+
+    times: dict[str, list[float]] = {"simulate": [], "unprojected": []}
+    finals = {"simulate": projected(y0), "unprojected": unprojected(y0)}
+    for _ in range(repeats):
+        for name, fn in (("simulate", projected), ("unprojected", unprojected)):
+            began = clock()
+            jax.block_until_ready(fn(y0))
+            times[name].append(clock() - began)
+    base = statistics.median(times["unprojected"])
+    print(f"\nsimulate, Tsit5, {steps} steps of 1e-3, one trajectory")
+    for name, label in (
+        ("unprojected", "diffrax Tsit5, hand-written, no projection"),
+        ("simulate", "lj.simulate, projected"),
+    ):
+        median = statistics.median(times[name])
+        residual = float(jnp.max(jnp.abs(rods(finals[name]))))
+        print(f"{label:44s} {1e3 * median:8.2f} ms {median / base:6.2f}  "
+              f"max |g| at the end {residual:.1e}")  # fmt: skip
 
 
 if __name__ == "__main__":
