@@ -79,17 +79,23 @@ def _residual_rows(constraints, unravel, q, v, t, args, k) -> list[Callable]:
     return [row(i) for i in range(k)]
 
 
-def _position_values(constraints, unravel, q, t, args) -> list[jax.Array]:
-    """g_i(q, t) as scalars (only Baumgarte's stabilization needs them)."""
+def _position_rows(constraints, unravel, q, t, args) -> list[Callable]:
+    """Each holonomic g_i(q, t) as a function of n + 1 scalars."""
     k_h = jax.eval_shape(constraints.position_residual, unravel(q), t, args).shape[0]
 
     def row(i):
         def residual(qf, tt):
             return constraints.position_residual(unravel(qf), tt, args)[i]
 
-        return scalar_argument_function(residual, q, t)(*q, t)
+        return scalar_argument_function(residual, q, t)
 
     return [row(i) for i in range(k_h)]
+
+
+def _position_values(constraints, unravel, q, t, args) -> list[jax.Array]:
+    """g_i(q, t) as scalars (only Baumgarte's stabilization needs them)."""
+    rows = _position_rows(constraints, unravel, q, t, args)
+    return [g(*q, t) for g in rows]
 
 
 def _constraint_rows(constraints: Constraints, unravel, q, v, t, args, k):
@@ -282,18 +288,11 @@ def scalar_position_projection(
     update is above `atol + rtol·|ν|` in some component or a pivot of M or of
     G M⁻¹Gᵀ is unsound; the caller then solves again by `optimistix.Newton`.
     """
-    k_h = jax.eval_shape(constraints.position_residual, q, t, args).shape[0]
     lag_flat, q_flat, v_flat, t, unravel = flat_lagrangian(lagrangian, q, qdot, t, args)
     n = q_flat.shape[0]
     mass, _ = scalar_system(lag_flat, q_flat, v_flat, t)
-
-    def row(i):
-        def residual(qf, tt):
-            return constraints.position_residual(unravel(qf), tt, args)[i]
-
-        return scalar_argument_function(residual, q_flat, t)
-
-    rows = [row(i) for i in range(k_h)]
+    rows = _position_rows(constraints, unravel, q_flat, t, args)
+    k_h = len(rows)
     start = [q_flat[m] for m in range(n)]
     jacobian = [[partial_derivative(g, j)(*start, t) for j in range(n)] for g in rows]
     factor = ldl_factor_unrolled(mass)
