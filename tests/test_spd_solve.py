@@ -264,6 +264,7 @@ def _factorization_shapes(function, platform: str, *inputs) -> dict[str, set[str
 
 # (coordinates, members, LAPACK calls on CPU: {routine: operand shapes})
 FACTORIZATIONS = [
+    (6, 5, {}),  # scalar LDLᵀ; its LU fallback by in-kernel loops
     (8, 5, {}),  # in-kernel loops, no LAPACK at all
     (17, 5, {"potrf": {"5x17x17"}, "getrf": {"5x17x17"}}),  # one batched call
     (17, 64, {"potrf": {"17x17"}, "getrf": {"64x17x17"}}),  # factored per member
