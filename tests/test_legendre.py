@@ -100,3 +100,17 @@ def test_dissipation_enters_legendre_vector_field():
     dq, dp = lag.to_hamiltonian().vector_field(0.3, 2.0 * -1.1)
     assert np.isclose(dq, -1.1)
     assert np.isclose(dp, -3.0 * 0.3 - 0.4 * -1.1)
+
+
+def test_velocity_from_momentum_of_a_five_link_chain():
+    # Five coordinates: the quadratic inverse in scalars with the unrolled LDLᵀ.
+    # Closed form: p = M(q) q̇, M_ij = (n − max(i, j)) cos(θ_i − θ_j).
+    from benchmarks.derivation_overhead import n_link_lagrangian, n_link_system
+
+    hamiltonian = lj.Lagrangian(n_link_lagrangian).to_hamiltonian()
+    q = jnp.linspace(0.3, 1.1, 5)
+    qdot = jnp.array([0.4, -0.2, 0.7, 0.1, -0.5])
+    mass, _ = n_link_system(q, qdot)
+    p = mass @ qdot
+    assert relative_close(hamiltonian.velocity(q, p), qdot, 1e-13)
+    assert relative_close(jax.jit(hamiltonian.velocity)(q, p), qdot, 1e-13)

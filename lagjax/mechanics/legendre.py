@@ -51,6 +51,7 @@ from .linalg import (
     singular_message_for,
     solve_dense,
     solve_unrolled,
+    solve_unrolled_symmetric,
 )
 from .scalarize import scalar_argument_function
 
@@ -144,9 +145,7 @@ def _quadratic_inverse_in_scalars(
     if n <= UNROLLED_SOLVE_LIMIT:
         step, singular = solve_unrolled(hessian, residual)
         return start - jnp.stack(step), singular
-    step, singular = solve_dense(
-        jnp.stack([jnp.stack(row) for row in hessian]), jnp.stack(residual)
-    )
+    step, singular = solve_unrolled_symmetric(hessian, residual)
     return start - step, singular
 
 
