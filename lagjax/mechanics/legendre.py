@@ -49,7 +49,7 @@ from .euler_lagrange import SCALAR_COORDINATE_LIMIT, partial_derivative
 from .linalg import (
     UNROLLED_SOLVE_LIMIT,
     singular_message_for,
-    solve_dense,
+    solve_dense_in_step,
     solve_unrolled,
     solve_unrolled_symmetric,
 )
@@ -105,7 +105,7 @@ def invert_gradient(
         return ravel_pytree(gradient)[0] - target_flat
 
     hessian = jax.jacfwd(residual)(start, None)
-    step, singular = solve_dense(hessian, residual(start, None))
+    step, singular = solve_dense_in_step(hessian, residual(start, None))
     if quadratic:
         return unravel(verdict(start - step, singular, singular_message))
     start = verdict(start, singular, singular_message)
@@ -113,7 +113,9 @@ def invert_gradient(
     near = _damped_newton(merit, residual, start)
     # One more Newton step, differentiable: from the converged (stop_gradient)
     # point its derivative is −(∂r/∂x)⁻¹ ∂r/∂θ, the implicit-function theorem's.
-    step, singular = solve_dense(jax.jacfwd(residual)(near, None), residual(near, None))
+    step, singular = solve_dense_in_step(
+        jax.jacfwd(residual)(near, None), residual(near, None)
+    )
     size = jax.lax.stop_gradient(jnp.max(jnp.abs(step)))
     converged = ~singular & (size <= _step_tolerance(near))
     return unravel(verdict(near - step, ~converged, _no_inverse_message(what)))
@@ -185,7 +187,7 @@ def _damped_newton(merit, residual, start: jax.Array) -> jax.Array:
     def body(carry):
         x, _, k = carry
         gradient = residual(x, None)
-        direction, _ = solve_dense(jax.jacfwd(residual)(x, None), gradient)
+        direction, _ = solve_dense_in_step(jax.jacfwd(residual)(x, None), gradient)
         slope, value = jnp.dot(gradient, direction), merit(x)
 
         def rejected(length):
