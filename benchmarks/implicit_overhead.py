@@ -27,7 +27,8 @@ The twins, each a `lax.scan` over steps on a flat state:
 - `VariationalMidpoint`: the midpoint discrete Euler–Lagrange equation
   p₀ + ∂L_d/∂q₀ − ∂L_d/∂Δq = 0 for Δq, scaled by 1 + max|p₀|, with L_d written by
   hand; Newton's method from Δq = h q̇(q₀, p₀), the 2×2 Jacobian by `jax.jacfwd`
-  of the residual and `jnp.linalg.solve`, stopped as `optimistix.Newton` stops
+  of the residual solved by Cramer's rule (lagjax: conjugate gradients on the
+  normal equations, on CPU; both LAPACK-free), stopped as `optimistix.Newton` stops
   (step below 10⁻¹³(1 + |Δq|) and residual below 10⁻¹³), at most 32 iterations;
   q and p updated with Kahan summation.
 - `Rattle`: SHAKE's multiplier Λ = h²λ/2 for the one constraint g = |q|² − 1 by
@@ -166,7 +167,15 @@ def variational_twin(steps: int, h: float):
             return (p + d_q0 - d_dq) / scale
 
         def solve(dq, value):
-            return jnp.linalg.solve(jax.jacfwd(residual)(dq), value)
+            # The 2 × 2 Newton system by Cramer's rule, as one writes it by hand
+            # (`jnp.linalg.solve`, a LAPACK call, kept the loop body from being
+            # one kernel: 2.7 µs/step against lagjax's 0.8).
+            (a, b), (c, d) = jax.jacfwd(residual)(dq)
+            det = a * d - b * c
+            return (
+                jnp.stack([d * value[0] - b * value[1], a * value[1] - c * value[0]])
+                / det
+            )
 
         guess = h * hamilton_rates(jnp.concatenate([q, p]))[:2]
         dq = newton_loop(residual, solve, guess, NEWTON_TOLERANCE, 32)

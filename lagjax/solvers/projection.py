@@ -38,7 +38,6 @@ import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import lineax as lx
 import optimistix as optx
 from jax.flatten_util import ravel_pytree
 
@@ -51,7 +50,7 @@ from lagjax.mechanics.scalar_constraints import (
     scalar_position_projection,
     scalar_velocity_correction,
 )
-from lagjax.precision import match_dtypes, newton_for
+from lagjax.precision import match_dtypes, newton_for, root_find_in_step
 from lagjax.terms import ConstrainedLagrangianTerm, unwrap_term
 
 
@@ -148,10 +147,8 @@ def _project_positions_by_optimistix(
     loop body, even in a branch never taken, keeps XLA on CPU from compiling the
     body as one kernel (Cartesian double pendulum, Tsit5 projected: 1.4 ms
     with this branch free of LAPACK against 3.6 ms with one LU in it). So on CPU
-    M⁻¹Gᵀ comes from the in-kernel LU loops and Newton's linear solves from
-    lineax's conjugate gradients on the normal equations (matrix–vector products
-    only; Newton's own stopping test still decides the accuracy), and elsewhere
-    from LU as in the default.
+    M⁻¹Gᵀ comes from the in-kernel LU loops and Newton runs by
+    `precision.root_find_in_step` (conjugate gradients on the normal equations).
     """
     constraints = lagrangian.constraints
     k_h = constraints.position_residual(q, t, args).shape[0]
@@ -170,43 +167,15 @@ def _project_positions_by_optimistix(
     def defect(nu, _):
         return constraints.position_residual(unravel(q_flat + directions @ nu), t, args)
 
-    def solve(root_finder):
-        solution = optx.root_find(
-            defect,
-            root_finder,
-            jnp.zeros(k_h, q_flat.dtype),
-            max_steps=max_steps,
-            throw=False,
+    if in_kernel:
+        moved, result = root_find_in_step(
+            defect, newton, jnp.zeros(k_h, q_flat.dtype), max_steps
         )
-        return q_flat + directions @ solution.value, solution.result
-
-    if not in_kernel:
-        moved, result = solve(newton)
-        return unravel(moved), result
-    iterative = optx.Newton(
-        rtol=newton.rtol,
-        atol=newton.atol,
-        linear_solver=lx.Normal(
-            lx.CG(
-                rtol=newton.rtol,
-                atol=newton.atol,
-                max_steps=_CG_STEPS_PER_UNKNOWN * k_h,
-            )
-        ),
+        return unravel(q_flat + directions @ moved), result
+    solution = optx.root_find(
+        defect, newton, jnp.zeros(k_h, q_flat.dtype), max_steps=max_steps, throw=False
     )
-    moved, result = jax.lax.platform_dependent(
-        cpu=lambda: solve(iterative), default=lambda: solve(newton)
-    )
-    return unravel(moved), result
-
-
-# Conjugate-gradient steps per unknown in the fallback's Newton solves, on the
-# normal equations JᵀJ (symmetric positive definite for any nonsingular J; BiCGStab
-# broke down on J = −1, an indefinite M). In exact arithmetic CG ends in k steps on
-# a k × k system; the margin is for round-off. A solve that does not converge
-# fails the Newton iteration, which `simulate` reports: never a silent wrong
-# projection.
-_CG_STEPS_PER_UNKNOWN = 4
+    return unravel(q_flat + directions @ solution.value), solution.result
 
 
 def _project_velocities(lagrangian, q, qdot, t, args):

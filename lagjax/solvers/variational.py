@@ -30,11 +30,10 @@ import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import optimistix as optx
 from jax.flatten_util import ravel_pytree
 
 from lagjax.mechanics.lagrangian import Lagrangian
-from lagjax.precision import newton_for
+from lagjax.precision import newton_for, root_find_in_step
 from lagjax.solvers.compensated import compensated_add, zero_compensation
 from lagjax.terms import LagrangianTerm, physical_step
 
@@ -105,18 +104,17 @@ class VariationalMidpoint(diffrax.AbstractSolver):
 
         velocity = lagrangian.to_hamiltonian().velocity(q0, p0, t0, args)
         guess = h * ravel_pytree(velocity)[0]
-        solution = optx.root_find(
+        value, newton_result = root_find_in_step(
             residual,
             newton_for(guess.dtype, self.rtol, self.atol),
             guess,
-            max_steps=self.max_newton_steps,
-            throw=False,
+            self.max_newton_steps,
         )
         # Δp = ∂L_d/∂q0 directly: no cancellation between p1 and p0.
-        momentum_increment, _ = momenta(solution.value)
-        increment = (unravel(solution.value), unravel(momentum_increment))
+        momentum_increment, _ = momenta(value)
+        increment = (unravel(value), unravel(momentum_increment))
         y1, compensation = compensated_add(y0, increment, solver_state)
-        result = diffrax.RESULTS.promote(solution.result)
+        result = diffrax.RESULTS.promote(newton_result)
         return y1, None, dict(y0=y0, y1=y1), compensation, result
 
     def func(self, terms, t0, y0, args):
