@@ -180,11 +180,12 @@ class Lagrangian(AbstractSystem):
 
         A singular mass matrix — or, with constraints, a singular saddle-point
         matrix (redundant or degenerate constraints) — is never a finite wrong
-        number. By default (`check` None) a call on concrete values raises a clear error, and a call under a
-        trace — inside `jit`, `vmap` or an integration loop — returns NaN instead,
-        a test that costs one fused select rather than a branch that splits the
-        step (hand-written speed; `benchmarks/derivation_overhead.py`); check the
-        loop's result once, as `simulate` does. `check=True` raises also under
+        number. By default (`check` None) a call on concrete values raises a
+        clear error, and a call under a trace — inside `jit`, `vmap` or an
+        integration loop — returns NaN instead, a test that costs one fused
+        select rather than a branch that splits the step (hand-written speed;
+        `benchmarks/derivation_overhead.py`); check the loop's result once, as
+        `simulate` does. `check=True` raises also under
         `jit` (`eqx.error_if`, at a branch per call), `"nan"` always poisons,
         `False` skips the test (an exactly singular matrix still gives inf/NaN).
         """
@@ -212,7 +213,7 @@ class Lagrangian(AbstractSystem):
         if self.constraints is None:
             raise ValueError("this Lagrangian has no constraints")
         check_same_structure(q, qdot, "q", "qdot")
-        if self.formulation != "network" and scalar_constraints_apply(q):
+        if scalar_constraints_apply(self, q):
             force = self.generalized_force(q, qdot, t, args)
             return scalar_constrained_motion(
                 self._call_unchecked, self.constraints, q, qdot, t, args, force,

@@ -62,34 +62,39 @@ from .scalarize import scalar_argument_function
 from .unrolled_ldl import ldl_factor_unrolled, ldl_solve_unrolled, pivots_sound
 
 
-def scalar_constraints_apply(q: Any) -> bool:
-    """Whether the scalar formulation takes a constrained system on `q`."""
-    return ravel_pytree(q)[0].shape[0] <= SCALAR_COORDINATE_LIMIT
+def scalar_constraints_apply(lagrangian: Any, q: Any) -> bool:
+    """Whether the scalar formulation takes `lagrangian`'s constrained motion at
+    `q`: few coordinates, and not the network formulation (a trained L)."""
+    few = ravel_pytree(q)[0].shape[0] <= SCALAR_COORDINATE_LIMIT
+    return few and lagrangian.formulation != "network"
+
+
+def _scalar_components(vector_fn: Callable, count: int, *examples) -> list[Callable]:
+    """Each component of `vector_fn(*arrays)` as a function of the arrays' scalars."""
+
+    def component(i):
+        return scalar_argument_function(lambda *x: vector_fn(*x)[i], *examples)
+
+    return [component(i) for i in range(count)]
 
 
 def _residual_rows(constraints, unravel, q, v, t, args, k) -> list[Callable]:
     """Each velocity-level residual c_i(q, q̇, t) as a function of 2n + 1 scalars."""
 
-    def row(i):
-        def residual(qf, vf, tt):
-            return constraints.velocity_residual(unravel(qf), unravel(vf), tt, args)[i]
+    def residual(qf, vf, tt):
+        return constraints.velocity_residual(unravel(qf), unravel(vf), tt, args)
 
-        return scalar_argument_function(residual, q, v, t)
-
-    return [row(i) for i in range(k)]
+    return _scalar_components(residual, k, q, v, t)
 
 
 def _position_rows(constraints, unravel, q, t, args) -> list[Callable]:
     """Each holonomic g_i(q, t) as a function of n + 1 scalars."""
     k_h = jax.eval_shape(constraints.position_residual, unravel(q), t, args).shape[0]
 
-    def row(i):
-        def residual(qf, tt):
-            return constraints.position_residual(unravel(qf), tt, args)[i]
+    def residual(qf, tt):
+        return constraints.position_residual(unravel(qf), tt, args)
 
-        return scalar_argument_function(residual, q, t)
-
-    return [row(i) for i in range(k_h)]
+    return _scalar_components(residual, k_h, q, t)
 
 
 def _position_values(constraints, unravel, q, t, args) -> list[jax.Array]:
@@ -135,18 +140,24 @@ def _dot(a: list[jax.Array], b: list[jax.Array]) -> jax.Array:
     return total
 
 
-def _schur_solve(mass, rhs, jacobian, target):
-    """(q̈, λ, Aᵀλ) as lists of scalars, and whether both factorizations are sound."""
-    n, k = len(rhs), len(target)
+def _schur_factors(mass, jacobian):
+    """(LDLᵀ of M, the columns of M⁻¹Aᵀ, LDLᵀ of A M⁻¹Aᵀ), all in scalars."""
+    k = len(jacobian)
     factor = ldl_factor_unrolled(mass)
-    free = ldl_solve_unrolled(factor, rhs)
-    columns = [ldl_solve_unrolled(factor, row) for row in jacobian]  # M⁻¹Aᵀ, by columns
+    columns = [ldl_solve_unrolled(factor, row) for row in jacobian]
     schur = [
         [_dot(jacobian[i], columns[j]) if j >= i else None for j in range(k)]
         for i in range(k)
     ]
+    return factor, columns, ldl_factor_unrolled(schur)
+
+
+def _schur_solve(mass, rhs, jacobian, target):
+    """(q̈, λ, Aᵀλ) as lists of scalars, and whether both factorizations are sound."""
+    n, k = len(rhs), len(target)
+    factor, columns, schur_factor = _schur_factors(mass, jacobian)
+    free = ldl_solve_unrolled(factor, rhs)
     reduced = [target[i] - _dot(jacobian[i], free) for i in range(k)]
-    schur_factor = ldl_factor_unrolled(schur)
     multipliers = ldl_solve_unrolled(schur_factor, reduced)
     transposed = [[columns[j][m] for j in range(k)] for m in range(n)]
     qddot = [free[m] + _dot(transposed[m], multipliers) for m in range(n)]
@@ -295,13 +306,7 @@ def scalar_position_projection(
     k_h = len(rows)
     start = [q_flat[m] for m in range(n)]
     jacobian = [[partial_derivative(g, j)(*start, t) for j in range(n)] for g in rows]
-    factor = ldl_factor_unrolled(mass)
-    directions = [ldl_solve_unrolled(factor, g_row) for g_row in jacobian]
-    schur = [
-        [_dot(jacobian[i], directions[j]) if j >= i else None for j in range(k_h)]
-        for i in range(k_h)
-    ]
-    schur_factor = ldl_factor_unrolled(schur)
+    factor, directions, schur_factor = _schur_factors(mass, jacobian)
     by_coordinate = [[directions[j][m] for j in range(k_h)] for m in range(n)]
     nu = [jnp.zeros_like(t)] * k_h
     position, update = start, nu

@@ -105,7 +105,7 @@ def _project_positions(lagrangian, q, qdot, t, args, newton, max_steps):
     k_h = constraints.position_residual(q, t, args).shape[0]
     if k_h == 0:
         return q, optx.RESULTS.successful
-    if lagrangian.formulation != "network" and scalar_constraints_apply(q):
+    if scalar_constraints_apply(lagrangian, q):
         return _project_positions_scalar(
             lagrangian, q, qdot, t, args, newton, max_steps
         )
@@ -184,7 +184,7 @@ def _project_velocities(lagrangian, q, qdot, t, args):
     Returns `(qdot, singular)`; c is linear in q̇, so one solve is exact.
     """
     constraints = lagrangian.constraints
-    if lagrangian.formulation != "network" and scalar_constraints_apply(q):
+    if scalar_constraints_apply(lagrangian, q):
         return scalar_velocity_correction(lagrangian, constraints, q, qdot, t, args)
     qdot_flat, unravel = ravel_pytree(qdot)
     mass = lagrangian.mass_matrix(q, qdot, t, args)
