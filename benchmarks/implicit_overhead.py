@@ -27,8 +27,8 @@ The twins, each a `lax.scan` over steps on a flat state:
 - `VariationalMidpoint`: the midpoint discrete Euler–Lagrange equation
   p₀ + ∂L_d/∂q₀ − ∂L_d/∂Δq = 0 for Δq, scaled by 1 + max|p₀|, with L_d written by
   hand; Newton's method from Δq = h q̇(q₀, p₀), the 2×2 Jacobian by `jax.jacfwd`
-  of the residual solved by Cramer's rule (lagjax: conjugate gradients on the
-  normal equations, on CPU; both LAPACK-free), stopped as `optimistix.Newton` stops
+  of the residual solved by Cramer's rule (lagjax: LU with partial pivoting
+  unrolled into scalars, `InStepLU`; both LAPACK-free), stopped as `optimistix.Newton` stops
   (step below 10⁻¹³(1 + |Δq|) and residual below 10⁻¹³), at most 32 iterations;
   q and p updated with Kahan summation.
 - `Rattle`: SHAKE's multiplier Λ = h²λ/2 for the one constraint g = |q|² − 1 by

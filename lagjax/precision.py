@@ -19,12 +19,10 @@ Wanner, *Geometric Numerical Integration*, 2nd ed., Springer (2006), §VIII.5
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import Any, TypeVar
 
 import jax
 import jax.numpy as jnp
-import lineax as lx
 import numpy as np
 import optimistix as optx
 
@@ -93,51 +91,4 @@ def newton_for(dtype: Any, rtol: float, atol: float) -> optx.Newton:
     """`optimistix.Newton` whose tolerances `dtype` can reach (`reachable_tolerance`)."""
     return optx.Newton(
         rtol=reachable_tolerance(rtol, dtype), atol=reachable_tolerance(atol, dtype)
-    )
-
-
-# Conjugate-gradient steps per unknown in `root_find_in_step`'s linear solves. In
-# exact arithmetic CG ends in k steps on a k × k system; the margin is for
-# round-off on the normal equations (condition number squared).
-_CG_STEPS_PER_UNKNOWN = 8
-
-
-def root_find_in_step(
-    residual: Callable[[jax.Array, Any], jax.Array],
-    newton: optx.Newton,
-    guess: jax.Array,
-    max_steps: int,
-) -> tuple[jax.Array, optx.RESULTS]:
-    """`optimistix.root_find` by `newton` (no throw) for a solve inside a step:
-    `(value, result)`.
-
-    On CPU Newton's linear solves are lineax's conjugate gradients on the normal
-    equations JᵀJ (symmetric positive definite for any nonsingular J), matrix–
-    vector products only: a LAPACK routine anywhere in a loop body — lineax's
-    default LU is one — keeps XLA from compiling the body as one kernel, which
-    cost `VariationalMidpoint` 3.7× per step (`benchmarks/implicit_overhead.py`).
-    Newton's own stopping test still decides the accuracy, and a linear solve that
-    does not converge fails the iteration, which the caller reports. BiCGStab,
-    cheaper per step, broke down on J = −1. Other backends keep `newton` as given.
-    """
-    iterative = optx.Newton(
-        rtol=newton.rtol,
-        atol=newton.atol,
-        linear_solver=lx.Normal(
-            lx.CG(
-                rtol=newton.rtol,
-                atol=newton.atol,
-                max_steps=_CG_STEPS_PER_UNKNOWN * guess.size,
-            )
-        ),
-    )
-
-    def solve(root_finder):
-        solution = optx.root_find(
-            residual, root_finder, guess, max_steps=max_steps, throw=False
-        )
-        return solution.value, solution.result
-
-    return jax.lax.platform_dependent(
-        cpu=lambda: solve(iterative), default=lambda: solve(newton)
     )

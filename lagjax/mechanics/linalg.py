@@ -105,7 +105,7 @@ def solve_unrolled(
     return x, singular
 
 
-def _pivot_verdict(pivots: jax.Array) -> jax.Array:
+def pivot_verdict(pivots: jax.Array) -> jax.Array:
     """Whether the LU pivots (the diagonal of U) say singular: the smallest
     against the largest."""
     pivot_sizes = jnp.abs(pivots)
@@ -115,9 +115,9 @@ def _pivot_verdict(pivots: jax.Array) -> jax.Array:
 
 
 def _lu_verdict(m: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
-    """LU factors of m and its singular flag (`_pivot_verdict`)."""
+    """LU factors of m and its singular flag (`pivot_verdict`)."""
     lu, pivots = jsl.lu_factor(m)
-    return lu, pivots, _pivot_verdict(jnp.diagonal(lu))
+    return lu, pivots, pivot_verdict(jnp.diagonal(lu))
 
 
 def _solve_dense_in_kernel(m: jax.Array, rhs: jax.Array):
@@ -125,7 +125,7 @@ def _solve_dense_in_kernel(m: jax.Array, rhs: jax.Array):
     if m.shape[-1] > LOOP_FACTORIZATION_LIMIT:
         return solve_dense(m, rhs)
     x, pivots = solve_by_pivoted_lu(m, rhs)
-    return x, _pivot_verdict(pivots)
+    return x, pivot_verdict(pivots)
 
 
 def solve_dense_in_step(m: jax.Array, rhs: jax.Array) -> tuple[jax.Array, jax.Array]:

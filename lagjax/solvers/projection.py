@@ -42,6 +42,7 @@ import optimistix as optx
 from jax.flatten_util import ravel_pytree
 
 from lagjax.batch_branch import any_in_batch
+from lagjax.in_step_root_find import root_find_in_step
 from lagjax.mechanics.constraints import apply_rank_check, least_correction
 from lagjax.mechanics.lagrangian import Lagrangian, singular_check
 from lagjax.mechanics.linalg import solve_dense, solve_dense_in_step
@@ -50,7 +51,7 @@ from lagjax.mechanics.scalar_constraints import (
     scalar_position_projection,
     scalar_velocity_correction,
 )
-from lagjax.precision import match_dtypes, newton_for, root_find_in_step
+from lagjax.precision import match_dtypes, newton_for
 from lagjax.terms import ConstrainedLagrangianTerm, unwrap_term
 
 
@@ -148,7 +149,7 @@ def _project_positions_by_optimistix(
     body as one kernel (Cartesian double pendulum, Tsit5 projected: 1.4 ms
     with this branch free of LAPACK against 3.6 ms with one LU in it). So on CPU
     M⁻¹Gᵀ comes from the in-kernel LU loops and Newton runs by
-    `precision.root_find_in_step` (conjugate gradients on the normal equations).
+    `in_step_root_find.root_find_in_step` (its linear solves unrolled or as loops).
     """
     constraints = lagrangian.constraints
     k_h = constraints.position_residual(q, t, args).shape[0]
