@@ -36,15 +36,16 @@ import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import optimistix as optx
 from jax.flatten_util import ravel_pytree
 
+from lagjax.in_step_root_find import root_find_in_step
 from lagjax.mechanics.constraints import Constraints
 from lagjax.mechanics.lagrangian import Lagrangian
 from lagjax.mechanics.linalg import (
     UNROLLED_SOLVE_LIMIT,
     raise_if_singular,
     solve_dense,
+    solve_dense_in_step,
     solve_unrolled,
 )
 from lagjax.precision import newton_for
@@ -161,7 +162,7 @@ class Rattle(diffrax.AbstractSolver[_RattleState]):
         inverse_mass, guess, compensation = solver_state
         t1 = t0 + h
         q0, p0 = y0
-        increment_q, half_kick, newton = self._shake(
+        increment_q, half_kick, (multiplier, newton_result) = self._shake(
             lagrangian, inverse_mass, guess, q0, p0, t0, t1, h, args
         )
         compensation_q, compensation_p = compensation or (None, None)
@@ -173,8 +174,8 @@ class Rattle(diffrax.AbstractSolver[_RattleState]):
         if compensation is not None:
             compensation = (compensation_q, compensation_p)
         y1 = (q1, p1)
-        result = diffrax.RESULTS.promote(newton.result)
-        state = (inverse_mass, newton.value, compensation)
+        result = diffrax.RESULTS.promote(newton_result)
+        state = (inverse_mass, multiplier, compensation)
         return y1, None, dict(y0=y0, y1=y1), state, result
 
     def _shake(self, lagrangian, inverse_mass, guess, q0, p0, t0, t1, h, args):
@@ -191,17 +192,16 @@ class Rattle(diffrax.AbstractSolver[_RattleState]):
             increment = increment_free - directions @ multiplier
             return constraints.position_residual(unravel(q0_flat + increment), t1, args)
 
-        newton = optx.root_find(
+        multiplier, result = root_find_in_step(
             defect,
             newton_for(guess.dtype, self.rtol, self.atol),
             guess,
-            max_steps=self.max_newton_steps,
-            throw=False,
+            self.max_newton_steps,
         )
-        increment_q = increment_free - directions @ newton.value
+        increment_q = increment_free - directions @ multiplier
         # p_{1/2} = p0 + h/2 F0 − Gᵀλ h/2 with λ h²/2 = Λ.
-        half_kick = half_kick_free - jacobian.T @ newton.value / h
-        return unravel(increment_q), half_kick, newton
+        half_kick = half_kick_free - jacobian.T @ multiplier / h
+        return unravel(increment_q), half_kick, (multiplier, result)
 
     def _rattle_kick(self, lagrangian, inverse_mass, q1, p0, half_kick, t1, h, args):
         """Momentum half: Δp = p1 − p0 with p1 on the hidden constraint ġ = 0."""
@@ -227,11 +227,12 @@ def _solve_symmetric(matrix: jax.Array, rhs: jax.Array) -> tuple[jax.Array, jax.
     """Solve a small symmetric system; `(x, singular)`.
 
     Up to 3 constraints in closed form: on CPU an LU call per step for a 1×1 or 2×2
-    matrix cost RATTLE about 1.7× in run time (pendulum, 10⁵ steps).
+    matrix cost RATTLE about 1.7× in run time (pendulum, 10⁵ steps). More by the
+    in-kernel solve (no LAPACK call inside the step on CPU).
     """
     k = rhs.shape[0]
     if k > UNROLLED_SOLVE_LIMIT:
-        return solve_dense(matrix, rhs)
+        return solve_dense_in_step(matrix, rhs)
     rows = [[matrix[i, j] for j in range(k)] for i in range(k)]
     x, singular = solve_unrolled(rows, [rhs[i] for i in range(k)])
     return jnp.stack(x), singular
