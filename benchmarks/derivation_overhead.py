@@ -27,8 +27,10 @@ the time goes, `diffeqsolve` on the derived acceleration (the derivation's share
 
 Run: `python -m benchmarks.derivation_overhead [--steps N] [--batch B] [--repeats R]
 [--links 2 4 6 12 24 32] [--first-call-repeats R] [--skip-double-pendulum]
-[--clock cpu]` (`--links` / repeats 0 skip a part; `--clock cpu` times the n-link
-rows in process CPU time, robust on a loaded machine).
+[--clock cpu] [--link-batch B]` (`--links` / repeats 0 skip a part; `--clock cpu`
+times the n-link rows in process CPU time, robust on a loaded machine;
+`--link-batch 0` runs the n-link rows for one trajectory only: from n ≈ 32 the
+batched Cholesky twin can hang jaxlib 0.10.2's LAPACK thread pool, see the README).
 """
 
 from __future__ import annotations
@@ -166,8 +168,9 @@ def n_link_rows(
         q0, qd0 = jnp.linspace(0.3, 1.0, n), jnp.zeros(n)
         noise = 0.1 * jax.random.normal(jax.random.PRNGKey(n), (batch, n))
         batched_inputs = (q0 + noise, jnp.zeros((batch, n)))
-        row = [n]
-        for mode, inputs in (("single", (q0, qd0)), ("batched", batched_inputs)):
+        row: list = [n]
+        modes = [("single", (q0, qd0)), ("batched", batched_inputs)][: 1 + (batch > 0)]
+        for mode, inputs in modes:
             functions = {}
             for name, acceleration in candidates.items():
                 single = rk4_integrator(acceleration, steps, 1e-3)
@@ -182,7 +185,7 @@ def n_link_rows(
                       f"{1e6 * run_time / steps:9.2f} {run_time / best:6.2f}")  # fmt: skip
             ratio = results["lagjax, default"][1] / best
             row += [ratio, twin.split(", ")[1]]
-        table.append(row)
+        table.append(row + [float("nan"), "not run"] * (batch == 0))
     print(f"\nn-link ratios, lagjax default / faster closed-form twin (batch {batch})")
     print(f"{'n':>3s} {'single':>7s} {'twin':9s} {'batched':>8s} {'twin':9s}")
     for n, single_ratio, single_twin, batched_ratio, batched_twin in table:

@@ -43,6 +43,7 @@ from .linalg import (
     solve_unrolled_symmetric,
 )
 from .scalarize import scalar_argument_function
+from .window_cumsum import with_window_cumsums
 
 # Up to this many coordinates the scalar formulation is used; its trace grows as n²
 # while the dense one stays compact. Chosen by benchmarks/derivation_overhead.py.
@@ -169,9 +170,10 @@ def euler_lagrange_acceleration(
         if check == "nan":
             return unravel(qddot)  # poisoned already
     else:
+        lag_dense = with_window_cumsums(lag_flat, q_flat, v_flat, t)
 
         def build_dense():
-            mass, rhs = dense_system(lag_flat, q_flat, v_flat, t)
+            mass, rhs = dense_system(lag_dense, q_flat, v_flat, t)
             return mass, (rhs if force is None else rhs + force)
 
         # Without a check the verdict is discarded, so the factor is not judged.
