@@ -166,7 +166,7 @@ BATCHED_CHOLESKY_WORK_LIMIT = 64 * 16**3
 
 @jax.custom_batching.custom_vmap
 def _cholesky_per_member(m: jax.Array) -> jax.Array:
-    """The Cholesky factor of m (lower triangle read); under `vmap` beyond
+    """The Cholesky factor of m (`_lapack_cholesky`); under `vmap` beyond
     `BATCHED_CHOLESKY_WORK_LIMIT`, one LAPACK call per member (`lax.map`)
     instead of one batched call.
 
@@ -181,14 +181,30 @@ def _cholesky_per_member(m: jax.Array) -> jax.Array:
     Only on CPU (`lax.platform_dependent`): on a GPU (H100, jax 0.11.2) the map
     serialises the members, 1230× the batched factorization at n = 8 ×4096.
     """
-    return jax.lax.linalg.cholesky(m, symmetrize_input=False)
+    return _lapack_cholesky(m)
+
+
+def _lapack_cholesky(m: jax.Array) -> jax.Array:
+    """LAPACK's lower Cholesky factor of the symmetric m, read from m's upper
+    triangle: the factor of mᵀ, which is m's. XLA hands LAPACK column-major
+    matrices, and m's transpose already is one, where m itself took a transposing
+    copy at every call: that copy cost the 24-link pendulum's RK4 step 20 %
+    (1.21 → 1.03× the hand-written Cholesky twin, which factors mᵀ too, as
+    `jax.scipy.linalg.cho_factor` does for an upper factor)."""
+    return jax.lax.linalg.cholesky(jnp.swapaxes(m, -1, -2), symmetrize_input=False)
+
+
+def _upper_triangular_solve(factor: jax.Array, rhs: jax.Array) -> jax.Array:
+    """x with L Lᵀ x = rhs for LAPACK's lower factor L, handed over as the upper
+    factor Lᵀ (a transpose XLA does without a copy, see `_lapack_cholesky`)."""
+    return jsl.cho_solve((jnp.swapaxes(factor, -1, -2), False), rhs)
 
 
 @_cholesky_per_member.def_vmap
 def _cholesky_per_member_rule(axis_size, in_batched, m):
     if not in_batched[0]:
         return _cholesky_per_member(m), False
-    batched = functools.partial(jax.lax.linalg.cholesky, symmetrize_input=False)
+    batched = _lapack_cholesky
     if axis_size * m.shape[-1] ** 3 <= BATCHED_CHOLESKY_WORK_LIMIT:
         return batched(m), True
     # The hang is the CPU backend's: GPUs keep one batched call, which a map of
@@ -201,7 +217,7 @@ def _cholesky_per_member_rule(axis_size, in_batched, m):
 def _cholesky_solve(
     m: jax.Array, rhs: jax.Array, judge: bool
 ) -> tuple[jax.Array, jax.Array]:
-    """`(x, sound)`: x from the Cholesky factor of m (lower triangle read), and
+    """`(x, sound)`: x from the Cholesky factor of m (one triangle read), and
     whether that factor is to be used (`_factor_verdict`). Undifferentiated runs
     factor by XLA loops up to `LOOP_FACTORIZATION_LIMIT` coordinates
     (`loop_factorizations`), by LAPACK above, per member for large batches
@@ -212,7 +228,7 @@ def _cholesky_solve(
         x = solve_by_cholesky_factor(factor, rhs)
     else:
         factor = _cholesky_per_member(m)
-        x = jsl.cho_solve((factor, True), rhs)
+        x = _upper_triangular_solve(factor, rhs)
     return x, _factor_verdict(factor, judge)
 
 
@@ -226,10 +242,8 @@ def _cholesky_solve_jvp(judge: bool, primals, tangents) -> tuple[Any, Any]:
         factor = cholesky_by_columns(m)
         solve = solve_by_cholesky_factor
     else:
-        factor = jax.lax.linalg.cholesky(m, symmetrize_input=False)
-
-        def solve(factor, rhs):
-            return jsl.cho_solve((factor, True), rhs)
+        factor = _lapack_cholesky(m)
+        solve = _upper_triangular_solve
 
     sound = _factor_verdict(factor, judge)
     # Where LU takes over, x and dx are discarded; they must still not be NaN,
