@@ -9,9 +9,11 @@ derived by autodiff (`benchmarks/derivation_overhead.py`, 2-core CPU) against th
 hand-written twin that factors its closed-form M by LAPACK: n = 8 / 16, one
 trajectory 0.64 / 0.77× with these loops against 1.38 / 1.50× with LAPACK, ×64
 0.92 / 1.05× against 1.51 / 1.21×; with LAPACK only in the fallback branch (a
-probe without the rest of lagjax's solve) 1.34 / 2.28×. From n = 24 the loops gain
-nothing (1.55 and 1.38× against 1.78 and 1.39× at n = 24 and 32) and they add
-compile time, so larger systems keep LAPACK (`LOOP_FACTORIZATION_LIMIT`).
+probe without the rest of lagjax's solve) 1.34 / 2.28×. Above 16 the loops run
+faster still (n = 24: 0.55–0.64× one trajectory, 0.59× ×64, since the chain's
+cumulative sums became short windows, `window_cumsum`) but compile for 4–7 s
+against LAPACK's 1.1 s, at which LAPACK measures 1.00–1.12×: they would pay only
+after about 10⁵ steps, so larger systems keep LAPACK (`LOOP_FACTORIZATION_LIMIT`).
 
 **Cholesky** (Golub & Van Loan, *Matrix Computations*, 4th ed., Alg. 4.2.1, the
 column or "gaxpy" form): column k of the lower factor L of $M = L L^T$ is

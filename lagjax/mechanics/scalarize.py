@@ -26,10 +26,11 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 import jax
-import jax.extend as jex
 import jax.numpy as jnp
 import numpy as np
 from jax import lax
+
+from .jaxpr_interpreter import CALLS, evaluate_jaxpr
 
 MAX_SCALARIZED_SIZE = 64
 
@@ -123,7 +124,6 @@ _CUMULATIVE = {
     "cummax": lax.max,
     "cummin": lax.min,
 }
-_CALLS = frozenset({"pjit", "jit", "closed_call"})
 # Primitives without operands that produce a constant array (jnp.eye, jnp.arange).
 _CONSTANTS = frozenset({"iota"})
 
@@ -135,7 +135,7 @@ class _Unsupported(Exception):
 def _check(jaxpr: Any) -> None:
     for eqn in jaxpr.eqns:
         name = eqn.primitive.name
-        if name in _CALLS:
+        if name in CALLS:
             _check(eqn.params["jaxpr"].jaxpr)
         elif name not in _ELEMENTWISE | _STRUCTURAL | _CONSTANTS:
             raise _Unsupported(name)
@@ -269,35 +269,30 @@ def _structural(eqn: Any, operands: list[np.ndarray]) -> Any:
     return _reduce(operands[0], params["axes"], combine)
 
 
+def _scalar_rule(eqn: Any, operands: list[np.ndarray]) -> list[np.ndarray]:
+    """One equation on object arrays of scalars (`evaluate_jaxpr`'s rule)."""
+    name = eqn.primitive.name
+    if name in _ELEMENTWISE:
+        results = [_elementwise(eqn, operands)]
+    elif name in _CONSTANTS:
+        # Evaluated now, even inside jit: the value depends on no input.
+        with jax.ensure_compile_time_eval():
+            results = [_to_objects(np.asarray(eqn.primitive.bind(**eqn.params)))]
+    else:
+        results = _structural(eqn, operands)
+        results = results if name == "split" else [results]
+    return [np.asarray(value, dtype=object) for value in results]
+
+
 def _evaluate(jaxpr: Any, consts: Sequence[Any], inputs: Sequence[np.ndarray]) -> list:
-    env: dict[Any, np.ndarray] = {}
-
-    def read(atom):
-        if isinstance(atom, jex.core.Literal):
-            return _to_objects(np.asarray(atom.val))
-        return env[atom]
-
-    for var, value in zip(jaxpr.constvars, consts):
-        env[var] = _to_objects(value)
-    env.update(zip(jaxpr.invars, inputs))
-    for eqn in jaxpr.eqns:
-        operands = [read(v) for v in eqn.invars]
-        name = eqn.primitive.name
-        if name in _CALLS:
-            closed = eqn.params["jaxpr"]
-            results = _evaluate(closed.jaxpr, closed.consts, operands)
-        elif name in _ELEMENTWISE:
-            results = [_elementwise(eqn, operands)]
-        elif name in _CONSTANTS:
-            # Evaluated now, even inside jit: the value depends on no input.
-            with jax.ensure_compile_time_eval():
-                results = [_to_objects(np.asarray(eqn.primitive.bind(**eqn.params)))]
-        else:
-            results = _structural(eqn, operands)
-            results = results if name == "split" else [results]
-        for var, value in zip(eqn.outvars, results):
-            env[var] = np.asarray(value, dtype=object)
-    return [read(v) for v in jaxpr.outvars]
+    return evaluate_jaxpr(
+        jaxpr,
+        consts,
+        inputs,
+        _scalar_rule,
+        literal=lambda value: _to_objects(np.asarray(value)),
+        const=_to_objects,
+    )
 
 
 def scalarize(fn: Callable[..., jax.Array], *example: Any) -> Callable | None:

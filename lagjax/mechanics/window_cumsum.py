@@ -37,10 +37,10 @@ from collections.abc import Callable
 from typing import Any
 
 import jax
-import jax.extend as jex
-import jax.numpy as jnp
 import numpy as np
 from jax import lax
+
+from .jaxpr_interpreter import any_equation, evaluate_jaxpr
 
 # XLA's default `xla_reduce_window_rewrite_base_length`: windows up to this long
 # are left as they are, so cumulative sums this short keep JAX's own lowering.
@@ -48,8 +48,6 @@ REWRITE_BASE_LENGTH = 16
 # Up to here both windows sum at most REWRITE_BASE_LENGTH terms; longer axes keep
 # XLA's tree, whose cost per entry does not grow with n.
 MAX_REWRITTEN_LENGTH = REWRITE_BASE_LENGTH**2
-
-_CALLS = frozenset({"pjit", "jit", "closed_call"})
 
 
 def _block_length(n: int) -> int:
@@ -91,28 +89,12 @@ def dilated_cumsum(x: jax.Array, axis: int, reverse: bool) -> jax.Array:
     )
 
 
-def _evaluate(jaxpr: Any, consts: list[Any], *inputs: Any) -> list[Any]:
-    env: dict[Any, Any] = {}
-
-    def read(atom):
-        return atom.val if isinstance(atom, jex.core.Literal) else env[atom]
-
-    env.update(zip(jaxpr.constvars, consts))
-    env.update(zip(jaxpr.invars, inputs))
-    for eqn in jaxpr.eqns:
-        operands = [read(v) for v in eqn.invars]
-        name = eqn.primitive.name
-        if name in _CALLS:
-            closed = eqn.params["jaxpr"]
-            results = _evaluate(closed.jaxpr, closed.consts, *operands)
-        elif name == "cumsum" and _rewritten_length(
-            jnp.shape(operands[0])[eqn.params["axis"]]
-        ):
-            results = [dilated_cumsum(operands[0], **eqn.params)]
-        else:
-            results = _bind(eqn, operands)
-        env.update(zip(eqn.outvars, results))
-    return [read(v) for v in jaxpr.outvars]
+def _window_rule(eqn: Any, operands: list[Any]) -> list[Any]:
+    """One equation as written, or as `dilated_cumsum` for a long cumulative sum
+    (`evaluate_jaxpr`'s rule)."""
+    if _long_cumsum(eqn):
+        return [dilated_cumsum(operands[0], **eqn.params)]
+    return _bind(eqn, operands)
 
 
 def _bind(eqn: Any, operands: list[Any]) -> list[Any]:
@@ -126,7 +108,10 @@ def _bind(eqn: Any, operands: list[Any]) -> list[Any]:
     return results if eqn.primitive.multiple_results else [results]
 
 
-def _rewritten_length(n: int) -> bool:
+def _long_cumsum(eqn: Any) -> bool:
+    if eqn.primitive.name != "cumsum":
+        return False
+    n = eqn.invars[0].aval.shape[eqn.params["axis"]]
     return REWRITE_BASE_LENGTH < n <= MAX_REWRITTEN_LENGTH
 
 
@@ -135,23 +120,11 @@ def with_window_cumsums(fn: Callable[..., jax.Array], *example: Any) -> Callable
     cumulative sums as two short windows (module docstring); `fn` itself when it
     has none."""
     closed = jax.make_jaxpr(fn)(*example)
-    if len(closed.jaxpr.outvars) != 1 or not _has_long_cumsum(closed.jaxpr):
+    if len(closed.jaxpr.outvars) != 1 or not any_equation(closed.jaxpr, _long_cumsum):
         return fn
 
     def rewritten(*arrays: Any) -> Any:
-        (result,) = _evaluate(closed.jaxpr, closed.consts, *arrays)
+        (result,) = evaluate_jaxpr(closed.jaxpr, closed.consts, arrays, _window_rule)
         return result
 
     return rewritten
-
-
-def _has_long_cumsum(jaxpr: Any) -> bool:
-    for eqn in jaxpr.eqns:
-        if eqn.primitive.name in _CALLS:
-            if _has_long_cumsum(eqn.params["jaxpr"].jaxpr):
-                return True
-        elif eqn.primitive.name == "cumsum" and _rewritten_length(
-            eqn.invars[0].aval.shape[eqn.params["axis"]]
-        ):
-            return True
-    return False
