@@ -100,3 +100,17 @@ def test_parameters_through_args_are_traced_and_differentiated():
         assert relative_close(row, unit, 1e-12)
     gradient = jax.grad(lambda m: jnp.sum(lag.acceleration(q, qd, 0.0, m)))(2.0)
     assert abs(float(gradient)) < 1e-10 * float(jnp.max(jnp.abs(unit)))
+
+
+def test_legendre_inverse_of_a_24_link_chain_is_the_closed_form_velocity():
+    # p = M(q) q̇ with M_ij = (n − max(i, j)) cos(θ_i − θ_j); the Hamiltonian's
+    # velocity (the inverse Legendre transform, through the rewritten L) returns q̇.
+    n = 24
+    rng = np.random.default_rng(7)
+    q, qd = rng.uniform(-1.0, 1.0, size=n), rng.normal(size=n)
+    index = np.arange(n)
+    weight = n - np.maximum(index[:, None], index[None, :])
+    momentum = (weight * np.cos(q[:, None] - q[None, :])) @ qd
+    hamiltonian = lj.Lagrangian(chain_lagrangian).to_hamiltonian()
+    velocity = jax.jit(hamiltonian.velocity)(jnp.asarray(q), jnp.asarray(momentum))
+    assert relative_close(velocity, qd, 1e-10)

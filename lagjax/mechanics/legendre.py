@@ -54,6 +54,7 @@ from .linalg import (
     solve_unrolled_symmetric,
 )
 from .scalarize import scalar_argument_function
+from .window_cumsum import with_window_cumsums
 
 _NEWTON_RTOL = 1e-13
 _NEWTON_ATOL = 1e-13
@@ -99,17 +100,20 @@ def invert_gradient(
     if quadratic and target_flat.shape[0] <= SCALAR_COORDINATE_LIMIT:
         solution, singular = _quadratic_inverse_in_scalars(flat_function, target_flat)
         return unravel(verdict(solution, singular, singular_message))
+    # Many variables: a chain's long cumulative sums as short windows, which XLA
+    # keeps whole (GaussLegendre(2) on the 24-link pendulum, 200 steps: 39.9 →
+    # 24.3 ms).
+    flat_function = with_window_cumsums(flat_function, start)
 
     def residual(x_flat, _):
-        gradient = jax.grad(function)(unravel(x_flat))
-        return ravel_pytree(gradient)[0] - target_flat
+        return jax.grad(flat_function)(x_flat) - target_flat
 
     hessian = jax.jacfwd(residual)(start, None)
     step, singular = solve_dense_in_step(hessian, residual(start, None))
     if quadratic:
         return unravel(verdict(start - step, singular, singular_message))
     start = verdict(start, singular, singular_message)
-    merit = lambda x: function(unravel(x)) - jnp.dot(target_flat, x)
+    merit = lambda x: flat_function(x) - jnp.dot(target_flat, x)
     near = _damped_newton(merit, residual, start)
     # One more Newton step, differentiable: from the converged (stop_gradient)
     # point its derivative is −(∂r/∂x)⁻¹ ∂r/∂θ, the implicit-function theorem's.
