@@ -227,8 +227,9 @@ def _solve_symmetric(matrix: jax.Array, rhs: jax.Array) -> tuple[jax.Array, jax.
     """Solve a small symmetric system; `(x, singular)`.
 
     Up to 3 constraints in closed form: on CPU an LU call per step for a 1×1 or 2×2
-    matrix cost RATTLE about 1.7× in run time (pendulum, 10⁵ steps). More by the
-    in-kernel solve (no LAPACK call inside the step on CPU).
+    matrix cost RATTLE about 1.7× in run time (pendulum, 10⁵ steps). More
+    constraints by `solve_dense_in_step`, which calls no LAPACK routine inside the
+    step on CPU.
     """
     k = rhs.shape[0]
     if k > UNROLLED_SOLVE_LIMIT:
