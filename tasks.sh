@@ -31,7 +31,7 @@ shift || true
 case "$cmd" in
     demo)
         setup test
-        "$VENV/bin/python" -m lagjax.demo
+        "$VENV/bin/python" -m lagjax.cli.demo
         exec "$VENV/bin/lagjax" run foucault-pendulum "$@" ;;
     # Two pytest workers by default (the CI machine has 2 cores); LAGJAX_TEST_WORKERS=0
     # runs in one process. Whole files per worker: module fixtures (benchmark runs) and

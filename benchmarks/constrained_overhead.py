@@ -41,7 +41,7 @@ import jax.numpy as jnp  # noqa: E402
 import lagjax as lj  # noqa: E402
 from benchmarks.derivation_overhead import alternating_runs, rk4_integrator  # noqa: E402
 from benchmarks.kepler_saved import CLOCKS  # noqa: E402
-from lagjax.demo import G  # noqa: E402
+from lagjax.cli.demo import G  # noqa: E402
 
 
 def cartesian_lagrangian(q, qd):

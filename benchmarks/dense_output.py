@@ -7,11 +7,11 @@ of rounds over all runs:
 - `final state` and `ts on the grid`: the fixed-step scan path (`fixed_step.py`),
   untouched by dense output — the baseline;
 - `ts off the grid, linear`: `diffeqsolve` with the solver's own linear
-  interpolation (what `simulate` did before `lagjax.hermite`);
+  interpolation (what `simulate` did before `lagjax.solvers.hermite`);
 - `ts off the grid, Hermite`, `dense=True` (+ 100 `evaluate`s), `event` (apoapsis,
   half a period): what those requests cost now.
 
-The second table puts the fixed-step scan routes (`lagjax.scan_saving`) beside
+The second table puts the fixed-step scan routes (`lagjax._integrate.scan_saving`) beside
 hand-written `lax.scan` twins of the same method (Yoshida's triple jump, plain
 sums, the cubic Hermite extension written out) in the same run, on Kepler and
 on the pendulum, 1001 states each:
@@ -24,7 +24,7 @@ on the pendulum, 1001 states each:
 
 Measured 2026-11-25 (2-core CPU under load, `--steps 20000 --repeats 7 --clock
 cpu`, lagjax / twin; before = diffeqsolve's loop with the Hermite wrapper, after =
-the scans of `lagjax.scan_saving`):
+the scans of `lagjax._integrate.scan_saving`):
 
 | row | Kepler before → after | pendulum before → after |
 |---|---|---|
@@ -32,7 +32,7 @@ the scans of `lagjax.scan_saving`):
 | SaveAt(steps=True) | 1.46 → 1.66 | 1.67 → 1.74 |
 | dense=True + 1001 evaluate | 1.74 → 1.72 | 1.74 → 1.81 |
 
-With the XLA CPU defaults of `lagjax.xla_defaults`, diffeqsolve's loop already
+With the XLA CPU defaults of `lagjax._core.cpu_loops`, diffeqsolve's loop already
 ran these fixed-step runs about as fast as the scans do (the differences in
 steps/dense rows are within the run-to-run noise here, ±10%); the off-grid saves
 gain because the scan evaluates the field at bracket steps only. The rest of the

@@ -9,7 +9,7 @@ Hermite polynomial through the states and $h\dot y$ at the two ends of a step,
 $$y(s) = (2s^3 - 3s^2 + 1)\,y_0 + (s^3 - 2s^2 + s)\,h\dot y_0
        + (-2s^3 + 3s^2)\,y_1 + (s^3 - s^2)\,h\dot y_1,$$
 
-the extension `lagjax.hermite` gives Yoshida4. Reference: Yoshida, Phys. Lett. A
+the extension `lagjax.solvers.hermite` gives Yoshida4. Reference: Yoshida, Phys. Lett. A
 150 (1990) 262; Hairer, Nørsett & Wanner, *Solving ODEs I*, §II.6.
 """
 

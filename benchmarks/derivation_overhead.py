@@ -55,8 +55,8 @@ from benchmarks.kepler_saved import CLOCKS  # noqa: E402
 
 # The demo's L, written with indexing (`q[0]`, `q[1]`), and the textbook closed form
 # of its equations of motion (m = l = 1, g = G = 9.81).
-from lagjax.demo import G, handwritten_acceleration  # noqa: E402
-from lagjax.demo import double_pendulum as lagrangian_indexed  # noqa: E402
+from lagjax.cli.demo import G, handwritten_acceleration  # noqa: E402
+from lagjax.cli.demo import double_pendulum as lagrangian_indexed  # noqa: E402
 
 
 def lagrangian_matrix(q, qd):
@@ -200,7 +200,7 @@ import jax
 jax.config.update("jax_enable_x64", True)
 import diffrax, jax.numpy as jnp
 import lagjax as lj
-from lagjax.demo import double_pendulum, handwritten_acceleration
+from lagjax.cli.demo import double_pendulum, handwritten_acceleration
 solver = diffrax.{solver}()
 q0, qd0 = jnp.array([1.2, -0.4]), jnp.array([0.3, 0.1])
 lag = lj.Lagrangian(double_pendulum)

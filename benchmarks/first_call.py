@@ -40,7 +40,7 @@ import diffrax, jax.numpy as jnp, numpy as np
 from jax._src import monitoring
 import lagjax as lj
 from benchmarks.kepler_saved import CLOCKS
-from lagjax.demo import double_pendulum, handwritten_acceleration
+from lagjax.cli.demo import double_pendulum, handwritten_acceleration
 
 compiles = []
 monitoring.register_event_duration_secs_listener(

@@ -61,8 +61,8 @@ import numpy as np  # noqa: E402
 
 import lagjax as lj  # noqa: E402
 from benchmarks.kepler_saved import CLOCKS  # noqa: E402
-from lagjax.demo import G  # noqa: E402
-from lagjax.demo import double_pendulum as lagrangian  # noqa: E402
+from lagjax.cli.demo import G  # noqa: E402
+from lagjax.cli.demo import double_pendulum as lagrangian  # noqa: E402
 from lagjax.solvers.implicit import (  # noqa: E402
     GAUSS_LEGENDRE_1,
     GAUSS_LEGENDRE_2,

@@ -16,7 +16,7 @@ are timed with
   network formulation (`lagjax.mechanics.network_formulation`: one gradient and
   n + 1 Hessian–vector products in one forward-over-reverse pass, an LU solve;
   under a trace a singular mass matrix gives NaN, at the cost of one select);
-- `fused-hvp`: `lagjax.neural.network_acceleration`, the same products and solve
+- `fused-hvp`: `lagjax.mechanics.neural.network_acceleration`, the same products and solve
   without the check — the bare prediction;
 - diagnostics: `closed-form` (`formulation="closed_form"`, the scalar formulation
   built for formula Lagrangians, which sends each scalar tangent through the whole
@@ -73,10 +73,10 @@ import jax.numpy as jnp  # noqa: E402
 
 import lagjax as lj  # noqa: E402
 from benchmarks.kepler_saved import CLOCKS  # noqa: E402
-from lagjax.demo import handwritten_acceleration  # noqa: E402
+from lagjax._linalg.small_solves import solve_dense  # noqa: E402
+from lagjax.cli.demo import handwritten_acceleration  # noqa: E402
 from lagjax.mechanics.euler_lagrange import dense_system  # noqa: E402
-from lagjax.mechanics.linalg import solve_dense  # noqa: E402
-from lagjax.neural import network_acceleration  # noqa: E402
+from lagjax.mechanics.neural import network_acceleration  # noqa: E402
 
 
 class LagrangianMLP(eqx.Module):

@@ -14,9 +14,10 @@ variants run alternately so a busy machine slows both alike).
 
 With `--saves N` every run saves N + 1 states on the step grid (t = 0 included):
 `simulate` with `ts = linspace(0, T, N + 1)`, diffeqsolve with `SaveAt(ts=...)`, the
-twin with a nested scan. lagjax sets XLA's CPU loop threshold on import
-(`lagjax.xla_defaults`; `LAGJAX_NO_XLA_DEFAULTS=1` opts out): the header says
-whether it is in effect, and it applies to every column alike.
+twin with a nested scan. The benchmarks ask XLA's CPU backend to compile whole loop
+bodies (`lagjax.enable_fast_cpu_loops`, in `benchmarks/__init__.py`;
+`LAGJAX_PLAIN_CPU_LOOPS=1` leaves it off): the header says whether it is in effect,
+and it applies to every column alike.
 
 The last column, sim/plain, is simulate over the uncompensated twin of the same
 method (for a compensated solver: what Kahan summation and the loop cost together).
@@ -34,10 +35,13 @@ import jax.numpy as jnp
 import numpy as np
 
 import lagjax as lj
-from lagjax.fixed_step import integrate_fixed_steps, integrate_fixed_steps_saving
+from lagjax._core.cpu_loops import fast_cpu_loops_requested
+from lagjax._integrate.fixed_step_loop import (
+    integrate_fixed_steps,
+    integrate_fixed_steps_saving,
+)
 from lagjax.solvers.compensated import compensated_add, zero_compensation
 from lagjax.solvers.splitting import StormerVerlet, Yoshida4
-from lagjax.xla_defaults import cpu_loop_default_applied
 
 jax.config.update("jax_enable_x64", True)
 
@@ -258,7 +262,7 @@ def main():
     saving = "final state" if options.saves is None else f"{options.saves} saves"
     print(
         f"{options.steps} steps, {saving}, Kepler e = 0.6, device {jax.devices()[0]}, "
-        f"lagjax CPU loop default {cpu_loop_default_applied()}, {options.clock} clock"
+        f"fast CPU loops {fast_cpu_loops_requested()}, {options.clock} clock"
     )
     header = f"{'solver':34s} {'batch':>6s} {'compile sim/dfx/scan [s]':>25s}"
     print(

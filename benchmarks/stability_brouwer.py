@@ -38,7 +38,7 @@ the increment, ~hω times the state) and 4× for Yoshida4 (1.4·10⁻¹³ agains
   the modified energy — which depends on h — random-walks by ~(hω)² ulp(t)/h per
   step: a growth faster than √n that is the *time grid's* round-off, not the
   state's. The "raw" row shows it; `lj.simulate` now rounds such a dt onto an
-  exact grid (`lagjax.step_grid.grid_step`, a relative change below 1e-8), and the
+  exact grid (`lagjax._integrate.time_grid.grid_step`, a relative change below 1e-8), and the
   "exact grid" row shows the √n law restored.
 - The run is one `lax.scan` over the solver's own `step`, carrying its state (the
   Kahan compensation) from the first step to the last, with times t₀ + k·h as
@@ -67,8 +67,8 @@ import numpy as np
 import lagjax as lj
 from benchmarks.stability_engine import Measured, judged_row
 from lagjax import diagnostics
+from lagjax._integrate.time_grid import grid_step
 from lagjax.scenes.oscillators import HarmonicOscillator
-from lagjax.step_grid import grid_step
 
 SAMPLES = 10  # per window, at n·(0.91, 0.92, …, 1.00) periods
 ENSEMBLE = 32  # oscillators, started at different phases
@@ -249,7 +249,7 @@ class BrouwerStudy:
 def brouwer_study(quick: bool) -> BrouwerStudy:
     """Both splittings at 64 steps per period, compensated and plain; then h = 1/60."""
     dyadic, decades = 2.0**-6, 4 if quick else 6
-    # lj.simulate rounds an awkward dt onto an exact grid (lagjax.step_grid).
+    # lj.simulate rounds an awkward dt onto an exact grid (lagjax._integrate.time_grid).
     exact_sixtieth = grid_step(0.0, 10.0**decades, 1 / 60)
     attempts = [
         ("StormerVerlet, Kahan-compensated", lj.StormerVerlet(), dyadic),

@@ -2,7 +2,7 @@ r"""float32 against float64 for every scene: what single precision costs.
 
 Each scene of `lagjax.scenes.catalog()` runs twice with its default solver and
 step over its default span: once in float64 and once with the scene and its start
-cast to float32 (`lagjax.precision.cast_floats`; `lj.simulate` then works in
+cast to float32 (`lagjax._core.precision.cast_floats`; `lj.simulate` then works in
 float32 throughout, times included). Rows report
 
 - `error`: the float32 final state's relative distance from the float64 one — the
@@ -41,7 +41,7 @@ import numpy as np
 import lagjax as lj
 from benchmarks.stability_engine import Measured, judged_row
 from lagjax import diagnostics
-from lagjax.precision import cast_floats
+from lagjax._core.precision import cast_floats
 from lagjax.scenes import catalog
 from lagjax.scenes.rigid import SCENES as RIGID_SCENES
 from lagjax.solvers.lie_poisson import RigidBodyYoshida4

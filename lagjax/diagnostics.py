@@ -37,7 +37,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .trajectory import Trajectory
+from lagjax.trajectory import Trajectory
 
 
 class Timing(NamedTuple):

@@ -22,8 +22,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-from .simulate import System, simulate
-from .trajectory import Trajectory
+from lagjax._integrate.simulate import System, simulate
+from lagjax.trajectory import Trajectory
 
 _AXIS = "batch"
 

@@ -15,7 +15,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .system import AbstractSystem
+from lagjax._core.system import AbstractSystem
 
 
 class Trajectory(eqx.Module):
@@ -45,7 +45,7 @@ class Trajectory(eqx.Module):
 
         Needs `simulate(..., dense=True)` (or `saveat=diffrax.SaveAt(dense=True)`);
         between steps of a fixed-step solver it is the Hermite extension of
-        `lagjax.hermite`. An array `t` gives arrays with a leading time axis.
+        `lagjax.solvers.hermite`. An array `t` gives arrays with a leading time axis.
         """
         if self.dense_output is None:
             raise ValueError(

@@ -16,10 +16,14 @@ import numpy as np
 import pytest
 
 import lagjax as lj
-from lagjax.hamilton_principle import action, action_of_path, principal_function
+from lagjax.action_principle.hamilton_principle import (
+    action,
+    action_of_path,
+    principal_function,
+)
+from lagjax.action_principle.shooting import action_between, trajectory_between
 from lagjax.scenes.central import KeplerCartesian
 from lagjax.scenes.oscillators import HarmonicOscillator
-from lagjax.shooting import action_between, trajectory_between
 
 from .helpers import relative_close
 

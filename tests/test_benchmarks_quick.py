@@ -247,7 +247,7 @@ def test_round_off_follows_brouwers_law(results):
         assert compensated["error"] < plain["error"] / 3, (compensated, plain)
         assert 0 < compensated["error"] < 1e-13
     # A raw step of 1/60 makes the time grid round: faster than √n. On the exact
-    # grid lj.simulate uses (lagjax.step_grid) the √n law is back.
+    # grid lj.simulate uses (lagjax._integrate.time_grid) the √n law is back.
     rounded = rows[(case, "StormerVerlet, compensated, h = 1/60 (raw)")]
     assert rounded["outcome"] == "degraded" and _exponent(rounded) > 0.6, rounded
     exact = rows[(case, "StormerVerlet, compensated, h = 1/60 (exact grid)")]

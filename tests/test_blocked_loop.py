@@ -15,18 +15,18 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from lagjax.blocked_loop import BLOCKED_MIN_STEPS, block_length
-from lagjax.fixed_step import (
+from lagjax._integrate.blocked_loop import BLOCKED_MIN_STEPS, block_length
+from lagjax._integrate.fixed_step_loop import (
     integrate_every_step,
     integrate_fixed_steps,
     integrate_fixed_steps_saving,
 )
-from lagjax.solvers.splitting import StormerVerlet
-from lagjax.step_bodies import (
+from lagjax._integrate.scan_body import (
     initial_tracking_carry,
     tracking_scan,
     tracking_step_function,
 )
+from lagjax.solvers.splitting import StormerVerlet
 
 TERMS = (
     diffrax.ODETerm(lambda t, p, k: p),

@@ -1,4 +1,4 @@
-"""Dense output: the state between steps keeps the method's order (`lagjax.hermite`).
+"""Dense output: the state between steps keeps the method's order (`lagjax.solvers.hermite`).
 
 Every fixed-step solver runs a nonlinear problem at two steps h and h/2 and is read
 between its steps (mid-steps, off the grid) against a tight Dopri8 reference; the
@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import lagjax as lj
-from lagjax.special import complete_elliptic_k
+from lagjax.special_functions import complete_elliptic_k
 
 PENDULUM = lj.SeparableHamiltonian(lambda p: 0.5 * p**2, lambda q: -jnp.cos(q))
 PENDULUM_L = lj.Lagrangian(lambda q, qdot: 0.5 * qdot**2 + jnp.cos(q))
@@ -133,7 +133,7 @@ def test_order_between_steps(name):
 
 
 def test_linear_interpolation_is_replaced():
-    """Before lagjax.hermite the fixed-step solvers interpolated linearly: 3.6e-6
+    """Before lagjax.solvers.hermite the fixed-step solvers interpolated linearly: 3.6e-6
     between steps against ~1e-9 at the steps. Yoshida6 at h = 0.01 now matches its
     grid accuracy between steps too."""
     exact = reference("pendulum")

@@ -7,7 +7,7 @@ import numpy as np
 
 import lagjax as lj
 from lagjax.scenes.central import KeplerCartesian
-from lagjax.special import complete_elliptic_k
+from lagjax.special_functions import complete_elliptic_k
 
 PENDULUM = lj.SeparableHamiltonian(lambda p: 0.5 * p**2, lambda q: -jnp.cos(q))
 THETA0 = 2.0

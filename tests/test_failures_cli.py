@@ -16,9 +16,10 @@ import numpy as np
 import pytest
 
 import lagjax as lj
-from lagjax import cli, cli_run
+from lagjax.cli import command as cli
 from lagjax.cli import main
-from lagjax.cli_plot import _check_series
+from lagjax.cli import run as cli_run
+from lagjax.cli.plot import _check_series
 
 
 def one_error_line(capsys) -> str:
@@ -173,7 +174,7 @@ def test_any_unexpected_error_is_one_line(monkeypatch, capsys):
 
 
 def test_bench_from_an_installed_wheel_says_it_needs_a_clone(monkeypatch, capsys):
-    monkeypatch.setattr(cli, "__file__", "/site-packages/lagjax/cli.py")
+    monkeypatch.setattr(cli, "__file__", "/site-packages/lagjax/cli/command.py")
     assert main(["bench", "--quick"]) == 2
     line = one_error_line(capsys)
     assert "clone the repository" in line and "python -m benchmarks" in line

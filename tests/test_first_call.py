@@ -1,7 +1,7 @@
 """`simulate` compiles like a hand-written jitted `diffeqsolve`: once per configuration.
 
 Counted, not timed: XLA compilations are jax's `backend_compile` events. All the
-numeric work of a run is one compiled call (`lagjax.simulate._compiled_run`), so a
+numeric work of a run is one compiled call (`lagjax._integrate.simulate._compiled_run`), so a
 first call compiles no more often than `diffeqsolve` on hand-written equations of
 the same system and solver, and a second call with a new `y0` (or new parameters)
 of the same shapes compiles nothing. The runs are checked against the exact

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import lagjax as lj
-from lagjax.fixed_step import integrate_every_step
+from lagjax._integrate.fixed_step_loop import integrate_every_step
 
 STIFF = lj.SeparableHamiltonian(lambda p: 0.5 * p**2, lambda q: 5e3 * q**2)
 START = (jnp.asarray(1.0), jnp.asarray(0.0))

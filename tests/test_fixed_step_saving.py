@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import lagjax as lj
-from lagjax.fixed_step import uniform_grid_saves
+from lagjax._integrate.fixed_step_loop import uniform_grid_saves
 
 OSCILLATOR = lj.SeparableHamiltonian(lambda p: 0.5 * p**2, lambda q: 0.5 * q**2)
 START = (jnp.asarray(1.0), jnp.asarray(0.0))

@@ -1,7 +1,7 @@
 """The flat-vector route of `simulate`: same physics, one vector for diffrax.
 
 For a plain ODETerm `simulate` integrates the raveled (q, q̇) and unravels what it
-saves (`lagjax.flat_state`). The run must be the same run: same steps, same states,
+saves (`lagjax._integrate.flat_state`). The run must be the same run: same steps, same states,
 pytree coordinates and saved times intact.
 """
 
@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import lagjax as lj
-from lagjax.flat_state import FlatState, flattened
+from lagjax._integrate.flat_state import FlatState, flattened
 from lagjax.scenes.pendulums import DoublePendulum
 from tests.helpers import tree_allclose
 
@@ -37,7 +37,7 @@ def test_flat_run_is_the_pair_run():
     assert set(flat.q) == {"theta", "phi"} and flat.q["theta"].shape == (11,)
     assert int(flat.stats["num_steps"]) == int(pair.stats["num_steps"])
     # The same arithmetic, compiled as two programs: with lagjax's CPU loop default
-    # (lagjax.xla_defaults) XLA rounds them differently, by up to 2.6e-11 here, and
+    # (lagjax._core.cpu_loops) XLA rounds them differently, by up to 2.6e-11 here, and
     # both are 4.9e-9 from a reference at rtol 1e-14 (bit-identical without it).
     assert tree_allclose(flat.ys, pair.ys, rtol=1e-10, atol=1e-10)
     # L_z = sin²θ φ̇ is conserved: physics, not only agreement. Saved times fall

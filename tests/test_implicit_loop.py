@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import pytest
 
 import lagjax as lj
-from lagjax.step_bodies import steps_per_trip
+from lagjax._integrate.scan_body import steps_per_trip
 
 GRAVITY = 9.81
 

@@ -17,8 +17,8 @@ import numpy as np
 import optimistix as optx
 import pytest
 
-from lagjax.in_step_root_find import InStepLU, root_find_in_step
-from lagjax.mechanics.unrolled_lu import lu_solve_unrolled
+from lagjax._linalg.in_step_root_find import InStepLU, root_find_in_step
+from lagjax._linalg.unrolled_lu import lu_solve_unrolled
 from tests.helpers import relative_close
 
 

@@ -13,12 +13,12 @@ import jax.scipy.linalg as jsl
 import numpy as np
 import pytest
 
-from lagjax.mechanics.linalg import solve_dense, solve_dense_in_step
-from lagjax.mechanics.loop_factorizations import (
+from lagjax._linalg.loop_factorizations import (
     cholesky_by_columns,
     solve_by_cholesky_factor,
     solve_by_pivoted_lu,
 )
+from lagjax._linalg.small_solves import solve_dense, solve_dense_in_step
 from tests.helpers import relative_close
 from tests.test_spd_solve import (
     _factorization_shapes,

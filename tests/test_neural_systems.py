@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import lagjax as lj
-from lagjax.neural import network_acceleration
+from lagjax.mechanics.neural import network_acceleration
 
 START = (jnp.array([0.4, -0.3]), jnp.array([0.2, 0.5]))
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import lagjax as lj
-from lagjax.special import complete_elliptic_k
+from lagjax.special_functions import complete_elliptic_k
 
 PENDULUM = lj.SeparableHamiltonian(lambda p: 0.5 * p**2, lambda q: -jnp.cos(q))
 

@@ -6,7 +6,7 @@ import pytest
 
 import lagjax as lj
 from lagjax.phase_space import plot_poincare_section
-from lagjax.special import complete_elliptic_k
+from lagjax.special_functions import complete_elliptic_k
 
 OMEGA_X, OMEGA_Y = 1.0, np.sqrt(2.0)
 # Two uncoupled oscillators: every crossing of x = 0 upward lies on the ellipse

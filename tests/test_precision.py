@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 import lagjax as lj
-from lagjax.precision import cast_floats, reachable_tolerance, working_dtype
+from lagjax._core.precision import cast_floats, reachable_tolerance, working_dtype
 from lagjax.scenes import catalog
 from lagjax.scenes.central import KeplerCartesian
 from lagjax.scenes.pendulums import DoublePendulum, SimplePendulum

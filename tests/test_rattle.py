@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 import lagjax as lj
+from lagjax._core.terms import RattleTerm
 from lagjax.mechanics.constraints import Constraints
 from lagjax.solvers.rattle import Rattle
-from lagjax.terms import RattleTerm
 from tests.helpers import relative_close
 
 GRAVITY = 9.81

@@ -10,12 +10,12 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from lagjax._core.terms import RigidBodyTerm
 from lagjax.rigid import (
     RigidBody,
     axis_angle_quaternion,
     quaternion_to_matrix,
 )
-from lagjax.terms import RigidBodyTerm
 
 MOMENTS = jnp.array([1.0, 2.0, 3.0])
 Q0 = axis_angle_quaternion(jnp.array([0.6, -0.48, 0.64]), 0.9)

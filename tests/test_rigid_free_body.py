@@ -14,6 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from lagjax._core.terms import RigidBodyTerm
 from lagjax.rigid import (
     RigidBody,
     axis_angle_quaternion,
@@ -30,8 +31,10 @@ from lagjax.solvers.lie_poisson import (
     RigidBodyVerlet,
     RigidBodyYoshida4,
 )
-from lagjax.special import complete_elliptic_k, complete_elliptic_k_from_complement
-from lagjax.terms import RigidBodyTerm
+from lagjax.special_functions import (
+    complete_elliptic_k,
+    complete_elliptic_k_from_complement,
+)
 
 SAMPLES = 2001
 Q0 = axis_angle_quaternion(jnp.array([0.6, 0.0, 0.8]), 0.7)

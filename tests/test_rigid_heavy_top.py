@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 import lagjax as lj
+from lagjax._core.terms import RigidBodyTerm
 from lagjax.rigid import (
     euler_zxz_body_angular_velocity,
     euler_zxz_to_rotation,
@@ -26,7 +27,6 @@ from lagjax.rigid.heavy_top import (
 )
 from lagjax.scenes.rigid import HeavySymmetricTop
 from lagjax.solvers.lie_poisson import QuaternionProjection, RigidBodyYoshida4
-from lagjax.terms import RigidBodyTerm
 
 SAMPLES = 3001
 TOLERANCE = dict(rtol=1e-12, atol=1e-12)

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import lagjax as lj
+from lagjax._core.terms import RigidBodyTerm
 from lagjax.rigid import euler_zxz_to_rotation, quaternion_to_matrix
 from lagjax.scenes.rigid import (
     DAY,
@@ -18,7 +19,6 @@ from lagjax.scenes.rigid import (
     TorqueFreeBody,
 )
 from lagjax.solvers.lie_poisson import QuaternionProjection, RigidBodyYoshida4
-from lagjax.terms import RigidBodyTerm
 from tests.helpers import relative_close
 
 SAMPLES = 1201

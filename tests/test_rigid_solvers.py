@@ -16,8 +16,9 @@ import numpy as np
 import pytest
 
 import lagjax as lj
-from lagjax.fixed_step import integrate_fixed_steps
-from lagjax.precision import cast_floats
+from lagjax._core.precision import cast_floats
+from lagjax._core.terms import RigidBodyTerm
+from lagjax._integrate.fixed_step_loop import integrate_fixed_steps
 from lagjax.rigid import (
     RigidBody,
     axis_angle_quaternion,
@@ -31,7 +32,6 @@ from lagjax.solvers.lie_poisson import (
     RigidBodyVerlet,
     RigidBodyYoshida4,
 )
-from lagjax.terms import RigidBodyTerm
 from tests.helpers import relative_close, tree_allclose
 
 Q0 = axis_angle_quaternion(jnp.array([0.6, 0.0, 0.8]), 0.7)

@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import pytest
 
 import lagjax as lj
-from lagjax.demo import G, handwritten_acceleration
+from lagjax.cli.demo import G, handwritten_acceleration
 from tests.helpers import relative_close
 
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import lagjax as lj
-from lagjax.mechanics.scalarize import as_object_array, scalarize
+from lagjax._linalg.scalarize import as_object_array, scalarize
 from tests.helpers import relative_close
 
 G = 9.81

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import lagjax as lj
-from lagjax.scan_saving import scan_saving
+from lagjax._integrate.scan_saving import scan_saving
 
 OSCILLATOR = lj.SeparableHamiltonian(lambda p: 0.5 * p**2, lambda q: 0.5 * q**2)
 START = (jnp.asarray(1.0), jnp.asarray(0.0))

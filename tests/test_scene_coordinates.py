@@ -18,8 +18,8 @@ from jax.flatten_util import ravel_pytree
 import lagjax as lj
 import lagjax.scenes as scenes
 from lagjax.cli import main
-from lagjax.cli_plot import run_figure, unit_groups
-from lagjax.cli_run import MAX_SAVED_POINTS, _save_times
+from lagjax.cli.plot import run_figure, unit_groups
+from lagjax.cli.run import MAX_SAVED_POINTS, _save_times
 from lagjax.scenes.base import AbstractScene, StateKind
 
 matplotlib.use("Agg")

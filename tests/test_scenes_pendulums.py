@@ -10,9 +10,12 @@ import optimistix as optx
 import pytest
 
 import lagjax as lj
+from lagjax.sampled_signals import zero_crossing_times
 from lagjax.scenes.pendulums import DoublePendulum, SimplePendulum
-from lagjax.signals import zero_crossing_times
-from lagjax.special import complete_elliptic_k, complete_elliptic_k_from_complement
+from lagjax.special_functions import (
+    complete_elliptic_k,
+    complete_elliptic_k_from_complement,
+)
 
 
 @eqx.filter_jit

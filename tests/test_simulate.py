@@ -297,7 +297,7 @@ def test_fixed_steps_are_all_equal_on_an_awkward_dt():
     round-off. Over 6·10⁴ steps that stays at ~1e-16 (Brouwer, compensated);
     with the raw 1/60 the ulp-wobble of h made it 4.4e-14 (6·10⁵ steps: 7e-12).
     """
-    from lagjax.step_grid import grid_step
+    from lagjax._integrate.time_grid import grid_step
 
     steps, dt = 60_000, 1 / 60
     rounded = grid_step(0.0, steps * dt, dt)

@@ -11,8 +11,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from lagjax.mechanics.scalarize import scalarize
-from lagjax.mechanics.small_gradient import small_gradient
+from lagjax._linalg.scalarize import scalarize
+from lagjax._linalg.small_gradient import small_gradient
 from tests.helpers import relative_close
 
 

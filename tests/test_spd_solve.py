@@ -19,13 +19,13 @@ import numpy as np
 import pytest
 
 import lagjax as lj
-from lagjax.mechanics.linalg import (
+from lagjax._linalg.loop_factorizations import LOOP_FACTORIZATION_LIMIT
+from lagjax._linalg.small_solves import (
     solve_dense,
     solve_symmetric,
     solve_symmetric_system,
     solve_unrolled_symmetric,
 )
-from lagjax.mechanics.loop_factorizations import LOOP_FACTORIZATION_LIMIT
 from tests.helpers import relative_close
 
 N = 7

@@ -32,7 +32,7 @@ SCRIPT = textwrap.dedent(
     assert sharded.q.shape == (size, 5), sharded.q.shape
     # The sharded program is compiled for a per-device batch of 1, the plain one for
     # 10: XLA may vectorize (and so round) differently. With lagjax's CPU loop
-    # default (lagjax.xla_defaults) whole loop bodies are compiled as one kernel and
+    # default (lagjax._core.cpu_loops) whole loop bodies are compiled as one kernel and
     # the two differ by up to 1.7e-15 on values of order 1 (a few ulp).
     np.testing.assert_allclose(np.asarray(sharded.q), np.asarray(plain.q), rtol=0, atol=4e-15)
     np.testing.assert_allclose(np.asarray(sharded.p), np.asarray(plain.p), rtol=0, atol=4e-15)

@@ -6,7 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import lagjax as lj
-from lagjax.terms import LagrangianTerm
+from lagjax._core.terms import LagrangianTerm
 
 
 def double_pendulum(q, qd):

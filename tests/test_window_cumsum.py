@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import lagjax as lj
-from lagjax.mechanics.window_cumsum import dilated_cumsum, with_window_cumsums
+from lagjax._linalg.window_cumsum import dilated_cumsum, with_window_cumsums
 from tests.helpers import relative_close
 from tests.test_euler_lagrange_chain import chain_lagrangian, closed_form_acceleration
 

@@ -30,7 +30,11 @@ import jax
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
-from .signature import call_with_arity, check_same_structure, positional_arity
+from lagjax.mechanics.signature import (
+    call_with_arity,
+    check_same_structure,
+    positional_arity,
+)
 
 
 def poisson_bracket(

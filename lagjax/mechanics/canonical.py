@@ -35,7 +35,7 @@ import jax.numpy as jnp
 import optimistix as optx
 from jax.flatten_util import ravel_pytree
 
-from .signature import (
+from lagjax.mechanics.signature import (
     call_with_arity,
     check_same_structure,
     check_scalar,

@@ -29,7 +29,7 @@ import jax
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
-from .lagrangian import Lagrangian
+from lagjax.mechanics.lagrangian import Lagrangian
 
 
 def null_space(matrix: jax.Array, what: str) -> jax.Array:

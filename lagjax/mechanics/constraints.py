@@ -63,12 +63,12 @@ import jax.numpy as jnp
 from jax.core import Tracer
 from jax.flatten_util import ravel_pytree
 
-from .functions import as_system_function
-from .linalg import solve_dense_in_step
-from .signature import call_with_arity, positional_arity
+from lagjax._linalg.small_solves import solve_dense_in_step
+from lagjax.mechanics.functions import as_system_function
+from lagjax.mechanics.signature import call_with_arity, positional_arity
 
 if TYPE_CHECKING:
-    from .lagrangian import Lagrangian
+    from lagjax.mechanics.lagrangian import Lagrangian
 
 _RANK_MESSAGE = (
     "The constraint Jacobian ∂c/∂q̇ is rank-deficient at this state (or the mass "

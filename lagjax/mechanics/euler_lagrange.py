@@ -35,15 +35,15 @@ import jax
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
-from .linalg import (
+from lagjax._linalg.scalarize import scalar_argument_function
+from lagjax._linalg.small_solves import (
     UNROLLED_SOLVE_LIMIT,
     raise_if_singular,
     solve_symmetric_system,
     solve_unrolled,
     solve_unrolled_symmetric,
 )
-from .scalarize import scalar_argument_function
-from .window_cumsum import with_window_cumsums
+from lagjax._linalg.window_cumsum import with_window_cumsums
 
 # Up to this many coordinates the scalar formulation is used; its trace grows as n²
 # while the dense one stays compact. Chosen by benchmarks/derivation_overhead.py.

@@ -26,17 +26,17 @@ from typing import Any
 import equinox as eqx
 import jax
 
-from ..system import AbstractSystem, is_partitioned
-from .functions import as_system_function
-from .lagrangian import Lagrangian, singular_check
-from .legendre import invert_gradient, tree_dot
-from .signature import (
+from lagjax._core.system import AbstractSystem, is_partitioned
+from lagjax._linalg.small_gradient import small_gradient
+from lagjax.mechanics.functions import as_system_function
+from lagjax.mechanics.lagrangian import Lagrangian, singular_check
+from lagjax.mechanics.legendre import invert_gradient, tree_dot
+from lagjax.mechanics.signature import (
     call_with_arity,
     check_same_structure,
     check_scalar,
     positional_arity,
 )
-from .small_gradient import small_gradient
 
 
 class AbstractHamiltonian(AbstractSystem):
@@ -56,7 +56,7 @@ class AbstractHamiltonian(AbstractSystem):
         adaptive `Tsit5`."""
         import diffrax
 
-        from ..solvers.implicit import GaussLegendre
+        from lagjax.solvers.implicit import GaussLegendre
 
         return diffrax.Tsit5() if dt is None else GaussLegendre(stages=2)
 
@@ -65,13 +65,13 @@ class AbstractHamiltonian(AbstractSystem):
         splitting method for a separable H."""
         import diffrax
 
-        from ..solvers.splitting import AbstractSplittingSolver
-        from ..terms import (
+        from lagjax._core.terms import (
             HamiltonVectorField,
             LagrangianTerm,
             SeparableDrift,
             SeparableKick,
         )
+        from lagjax.solvers.splitting import AbstractSplittingSolver
 
         if solver.term_structure is LagrangianTerm:
             raise ValueError(
@@ -187,7 +187,7 @@ class SeparableHamiltonian(AbstractHamiltonian):
         """`Yoshida4` with `dt` (explicit, symplectic, order 4), else `Tsit5`."""
         import diffrax
 
-        from ..solvers.splitting import Yoshida4
+        from lagjax.solvers.splitting import Yoshida4
 
         return diffrax.Tsit5() if dt is None else Yoshida4()
 

@@ -24,18 +24,24 @@ import jax.numpy as jnp
 from jax.core import Tracer
 from jax.flatten_util import ravel_pytree
 
-from ..system import AbstractSystem, is_partitioned
-from .constraints import (
+from lagjax._core.system import AbstractSystem, is_partitioned
+from lagjax.mechanics.constraints import (
     Constraints,
     constrained_motion,
     refuse_start_off_constraints,
 )
-from .euler_lagrange import euler_lagrange_acceleration
-from .functions import as_system_function
-from .legendre import tree_dot
-from .network_formulation import holds_network, network_euler_lagrange_acceleration
-from .scalar_constraints import scalar_constrained_motion, scalar_constraints_apply
-from .signature import (
+from lagjax.mechanics.euler_lagrange import euler_lagrange_acceleration
+from lagjax.mechanics.functions import as_system_function
+from lagjax.mechanics.legendre import tree_dot
+from lagjax.mechanics.network_formulation import (
+    holds_network,
+    network_euler_lagrange_acceleration,
+)
+from lagjax.mechanics.scalar_constraints import (
+    scalar_constrained_motion,
+    scalar_constraints_apply,
+)
+from lagjax.mechanics.signature import (
     call_with_arity,
     check_same_structure,
     check_scalar,
@@ -43,7 +49,7 @@ from .signature import (
 )
 
 if TYPE_CHECKING:
-    from .hamiltonian import LegendreHamiltonian
+    from lagjax.mechanics.hamiltonian import LegendreHamiltonian
 
 
 def singular_check(check: bool | str | None, *trees: Any) -> bool | str:
@@ -253,7 +259,7 @@ class Lagrangian(AbstractSystem):
 
     def to_hamiltonian(self) -> LegendreHamiltonian:
         """The Legendre-transformed Hamiltonian H(q, p, t) = p·q̇ − L."""
-        from .hamiltonian import LegendreHamiltonian
+        from lagjax.mechanics.hamiltonian import LegendreHamiltonian
 
         return LegendreHamiltonian(self)
 
@@ -269,8 +275,8 @@ class Lagrangian(AbstractSystem):
         adaptive `Tsit5`; with constraints, `Tsit5` projected onto them."""
         import diffrax
 
-        from ..solvers.implicit import GaussLegendre
-        from ..solvers.projection import ConstraintProjection
+        from lagjax.solvers.implicit import GaussLegendre
+        from lagjax.solvers.projection import ConstraintProjection
 
         if self.constraints is not None:
             return ConstraintProjection(diffrax.Tsit5())
@@ -281,10 +287,10 @@ class Lagrangian(AbstractSystem):
         would ignore the constraints are refused."""
         if self.constraints is None:
             return solver
-        from ..solvers.implicit import AbstractGaussLegendre
-        from ..solvers.projection import ConstraintProjection
-        from ..solvers.rattle import Rattle
-        from ..terms import LagrangianTerm
+        from lagjax._core.terms import LagrangianTerm
+        from lagjax.solvers.implicit import AbstractGaussLegendre
+        from lagjax.solvers.projection import ConstraintProjection
+        from lagjax.solvers.rattle import Rattle
 
         if isinstance(solver, (ConstraintProjection, Rattle)):
             return solver
@@ -308,13 +314,13 @@ class Lagrangian(AbstractSystem):
         ones, the constraints for RATTLE)."""
         import diffrax
 
-        from ..solvers.implicit import AbstractGaussLegendre
-        from ..terms import (
+        from lagjax._core.terms import (
             ConstrainedLagrangianTerm,
             LagrangianTerm,
             LagrangianVectorField,
             RattleTerm,
         )
+        from lagjax.solvers.implicit import AbstractGaussLegendre
 
         def canonical_start():
             q0, qdot0 = y0

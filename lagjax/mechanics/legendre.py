@@ -43,18 +43,17 @@ import jax.extend as jex
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
-from lagjax.precision import reachable_tolerance
-
-from .euler_lagrange import SCALAR_COORDINATE_LIMIT, partial_derivative
-from .linalg import (
+from lagjax._core.precision import reachable_tolerance
+from lagjax._linalg.scalarize import scalar_argument_function
+from lagjax._linalg.small_solves import (
     UNROLLED_SOLVE_LIMIT,
     singular_message_for,
     solve_dense_in_step,
     solve_unrolled,
     solve_unrolled_symmetric,
 )
-from .scalarize import scalar_argument_function
-from .window_cumsum import with_window_cumsums
+from lagjax._linalg.window_cumsum import with_window_cumsums
+from lagjax.mechanics.euler_lagrange import SCALAR_COORDINATE_LIMIT, partial_derivative
 
 _NEWTON_RTOL = 1e-13
 _NEWTON_ATOL = 1e-13

@@ -62,11 +62,11 @@ import jax
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
-from . import stability
-from .constrained_modes import null_space
-from .constraints import least_correction
-from .hamiltonian import AbstractHamiltonian
-from .lagrangian import Lagrangian
+from lagjax.mechanics import stability
+from lagjax.mechanics.constrained_modes import null_space
+from lagjax.mechanics.constraints import least_correction
+from lagjax.mechanics.hamiltonian import AbstractHamiltonian
+from lagjax.mechanics.lagrangian import Lagrangian
 
 
 class LinearizedSystem(eqx.Module):

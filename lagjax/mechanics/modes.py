@@ -49,9 +49,9 @@ import jax.scipy.linalg as jsl
 import optimistix as optx
 from jax.flatten_util import ravel_pytree
 
-from . import stability
-from .constrained_modes import reduce_to_constraint_surface
-from .lagrangian import Lagrangian
+from lagjax.mechanics import stability
+from lagjax.mechanics.constrained_modes import reduce_to_constraint_surface
+from lagjax.mechanics.lagrangian import Lagrangian
 
 # ‖Ĝ‖ below this fraction of √‖K̂‖ (both in mass-normalised coordinates, 1/time)
 # counts as no gyroscopic coupling: its first-order effect on the frequencies is

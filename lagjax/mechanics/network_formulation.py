@@ -43,8 +43,8 @@ import jax
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
-from .euler_lagrange import apply_singular_check, flat_lagrangian
-from .linalg import solve_dense
+from lagjax._linalg.small_solves import solve_dense
+from lagjax.mechanics.euler_lagrange import apply_singular_check, flat_lagrangian
 
 FlatLagrangian = Callable[[jax.Array, jax.Array, jax.Array], jax.Array]
 

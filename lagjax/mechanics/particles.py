@@ -47,8 +47,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .hamiltonian import SeparableHamiltonian
-from .lagrangian import Lagrangian
+from lagjax.mechanics.hamiltonian import SeparableHamiltonian
+from lagjax.mechanics.lagrangian import Lagrangian
 
 PairPotential = Callable[[jax.Array], jax.Array]
 ExternalPotential = Callable[[jax.Array], jax.Array]

@@ -37,9 +37,9 @@ import numpy as np
 import optimistix as optx
 from jax.flatten_util import ravel_pytree
 
-from .hamiltonian import AbstractHamiltonian
-from .lagrangian import Lagrangian
-from .stability import is_concrete
+from lagjax.mechanics.hamiltonian import AbstractHamiltonian
+from lagjax.mechanics.lagrangian import Lagrangian
+from lagjax.mechanics.stability import is_concrete
 
 
 class _Solved(NamedTuple):

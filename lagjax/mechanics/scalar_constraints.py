@@ -42,14 +42,21 @@ import jax
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
-from ..batch_branch import any_in_batch
-from .constraints import (
+from lagjax._core.batch_branch import any_in_batch
+from lagjax._linalg.scalarize import scalar_argument_function
+from lagjax._linalg.small_solves import solve_dense_in_step
+from lagjax._linalg.unrolled_ldl import (
+    ldl_factor_unrolled,
+    ldl_solve_unrolled,
+    pivots_sound,
+)
+from lagjax.mechanics.constraints import (
     Constraints,
     apply_rank_check,
     check_constraint_count,
     least_correction,
 )
-from .euler_lagrange import (
+from lagjax.mechanics.euler_lagrange import (
     SCALAR_COORDINATE_LIMIT,
     apply_singular_check,
     dense_system,
@@ -57,9 +64,6 @@ from .euler_lagrange import (
     partial_derivative,
     scalar_system,
 )
-from .linalg import solve_dense_in_step
-from .scalarize import scalar_argument_function
-from .unrolled_ldl import ldl_factor_unrolled, ldl_solve_unrolled, pivots_sound
 
 
 def scalar_constraints_apply(lagrangian: Any, q: Any) -> bool:

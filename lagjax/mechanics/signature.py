@@ -16,7 +16,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from .functions import StaticFunction
+from lagjax.mechanics.functions import StaticFunction
 
 _POSITIONAL = (
     inspect.Parameter.POSITIONAL_ONLY,

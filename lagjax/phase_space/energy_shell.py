@@ -22,8 +22,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax.flatten_util import ravel_pytree
 
-from ..mechanics.lagrangian import Lagrangian
-from .flow import resolve_system
+from lagjax.mechanics.lagrangian import Lagrangian
+from lagjax.phase_space.flow import resolve_system
 
 _NEWTON_ITERATIONS = 30
 

@@ -24,10 +24,10 @@ import jax
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
-from ..mechanics.hamiltonian import AbstractHamiltonian
-from ..mechanics.lagrangian import Lagrangian
-from ..scenes.base import AbstractScene
-from ..simulate import simulate
+from lagjax._integrate.simulate import simulate
+from lagjax.mechanics.hamiltonian import AbstractHamiltonian
+from lagjax.mechanics.lagrangian import Lagrangian
+from lagjax.scenes.base import AbstractScene
 
 
 class PhaseFlow(eqx.Module):

@@ -19,8 +19,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..mechanics.hamiltonian import SeparableHamiltonian
-from .energy_shell import states_on_energy_shell
+from lagjax.mechanics.hamiltonian import SeparableHamiltonian
+from lagjax.phase_space.energy_shell import states_on_energy_shell
 
 ESCAPE_ENERGY = 1 / 6
 

@@ -38,7 +38,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .flow import interval_count, phase_flow, resolve_interval
+from lagjax.phase_space.flow import interval_count, phase_flow, resolve_interval
 
 
 class ChaosIndicators(eqx.Module):

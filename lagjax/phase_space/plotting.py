@@ -11,7 +11,7 @@ from typing import Any
 import jax
 import numpy as np
 
-from .sections import PoincareSection, poincare_section
+from lagjax.phase_space.sections import PoincareSection, poincare_section
 
 
 def _coordinate(section: PoincareSection, pick: Callable[[Any, Any], Any]):

@@ -32,7 +32,7 @@ import jax
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
-from .flow import PhaseFlow, interval_count, phase_flow
+from lagjax.phase_space.flow import PhaseFlow, interval_count, phase_flow
 
 _HENON_SUBSTEPS = 4
 _CHUNK = 64  # steps between two writes of the crossing buffers

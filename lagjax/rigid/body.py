@@ -39,12 +39,11 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from lagjax._core.system import AbstractSystem
 from lagjax.mechanics.functions import as_system_function
 from lagjax.mechanics.signature import call_with_arity, check_scalar, positional_arity
-from lagjax.system import AbstractSystem
-
-from .inertia import check_moments
-from .quaternion import (
+from lagjax.rigid.inertia import check_moments
+from lagjax.rigid.quaternion import (
     check_nonzero_quaternion,
     quaternion_rate,
     quaternion_to_matrix,
@@ -214,7 +213,7 @@ class RigidBody(AbstractSystem):
     def integration(self, solver: Any, y0: Any, t0: Any, args: Any) -> Any:
         """The `RigidBodyTerm`: any solver integrates it, Lie–Poisson ones read the
         body from it."""
-        from lagjax.terms import RigidBodyTerm
+        from lagjax._core.terms import RigidBodyTerm
 
         return RigidBodyTerm(self), y0, self
 

@@ -36,7 +36,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from .quaternion import axis_angle_quaternion, quaternion_multiply
+from lagjax.rigid.quaternion import axis_angle_quaternion, quaternion_multiply
 
 
 def _unpack(angles: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:

@@ -41,7 +41,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from lagjax.special import complete_elliptic_k_from_complement
+from lagjax.special_functions import complete_elliptic_k_from_complement
 
 
 def symmetric_precession_rate(moments: jax.Array, omega_3: jax.Array) -> jax.Array:

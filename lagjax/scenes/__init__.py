@@ -8,35 +8,37 @@ See `base.AbstractScene` for the convention and `base.parameter` for how paramet
 are declared and checked.
 """
 
-from .base import AbstractScene as AbstractScene
-from .base import Interval as Interval
-from .base import parameter as parameter
-from .central import KeplerCartesian as KeplerCartesian
-from .central import KeplerPolar as KeplerPolar
-from .chains import FermiPastaUlamChain as FermiPastaUlamChain
-from .chains import LinearTriatomicMolecule as LinearTriatomicMolecule
-from .chains import SpringChain as SpringChain
-from .constrained import CartesianAtwoodMachine as CartesianAtwoodMachine
-from .constrained import CartesianPendulum as CartesianPendulum
-from .constrained import CartesianRotatingWireBead as CartesianRotatingWireBead
-from .constrained import RollingDisk as RollingDisk
-from .driven import DampedDrivenOscillator as DampedDrivenOscillator
-from .earth import EastwardDeflection as EastwardDeflection
-from .earth import FoucaultPendulum as FoucaultPendulum
-from .earth import PlumbLine as PlumbLine
-from .fields import AtwoodMachine as AtwoodMachine
-from .fields import ChargeInUniformFields as ChargeInUniformFields
-from .fields import FreeFall as FreeFall
-from .oscillators import CoupledOscillators as CoupledOscillators
-from .oscillators import HarmonicOscillator as HarmonicOscillator
-from .pendulums import DoublePendulum as DoublePendulum
-from .pendulums import SimplePendulum as SimplePendulum
-from .rigid import EarthFreePrecession as EarthFreePrecession
-from .rigid import HeavySymmetricTop as HeavySymmetricTop
-from .rigid import TorqueFreeBody as TorqueFreeBody
-from .rotating import AcceleratedFrameParticle as AcceleratedFrameParticle
-from .rotating import BeadOnRotatingWire as BeadOnRotatingWire
-from .rotating import SpinningFrameParticle as SpinningFrameParticle
+from lagjax.scenes.base import AbstractScene as AbstractScene
+from lagjax.scenes.base import Interval as Interval
+from lagjax.scenes.base import parameter as parameter
+from lagjax.scenes.central import KeplerCartesian as KeplerCartesian
+from lagjax.scenes.central import KeplerPolar as KeplerPolar
+from lagjax.scenes.chains import FermiPastaUlamChain as FermiPastaUlamChain
+from lagjax.scenes.chains import LinearTriatomicMolecule as LinearTriatomicMolecule
+from lagjax.scenes.chains import SpringChain as SpringChain
+from lagjax.scenes.constrained import CartesianAtwoodMachine as CartesianAtwoodMachine
+from lagjax.scenes.constrained import CartesianPendulum as CartesianPendulum
+from lagjax.scenes.constrained import (
+    CartesianRotatingWireBead as CartesianRotatingWireBead,
+)
+from lagjax.scenes.constrained import RollingDisk as RollingDisk
+from lagjax.scenes.driven import DampedDrivenOscillator as DampedDrivenOscillator
+from lagjax.scenes.earth import EastwardDeflection as EastwardDeflection
+from lagjax.scenes.earth import FoucaultPendulum as FoucaultPendulum
+from lagjax.scenes.earth import PlumbLine as PlumbLine
+from lagjax.scenes.fields import AtwoodMachine as AtwoodMachine
+from lagjax.scenes.fields import ChargeInUniformFields as ChargeInUniformFields
+from lagjax.scenes.fields import FreeFall as FreeFall
+from lagjax.scenes.oscillators import CoupledOscillators as CoupledOscillators
+from lagjax.scenes.oscillators import HarmonicOscillator as HarmonicOscillator
+from lagjax.scenes.pendulums import DoublePendulum as DoublePendulum
+from lagjax.scenes.pendulums import SimplePendulum as SimplePendulum
+from lagjax.scenes.rigid import EarthFreePrecession as EarthFreePrecession
+from lagjax.scenes.rigid import HeavySymmetricTop as HeavySymmetricTop
+from lagjax.scenes.rigid import TorqueFreeBody as TorqueFreeBody
+from lagjax.scenes.rotating import AcceleratedFrameParticle as AcceleratedFrameParticle
+from lagjax.scenes.rotating import BeadOnRotatingWire as BeadOnRotatingWire
+from lagjax.scenes.rotating import SpinningFrameParticle as SpinningFrameParticle
 
 # The catalogue's order (not alphabetical): from the oscillator to the rolling disk,
 # as a course goes.

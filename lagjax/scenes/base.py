@@ -54,9 +54,9 @@ import numpy as np
 from jax.core import Tracer
 from jax.flatten_util import ravel_pytree
 
+from lagjax._core.system import AbstractSystem
 from lagjax.mechanics.hamiltonian import AbstractHamiltonian
 from lagjax.mechanics.lagrangian import Lagrangian
-from lagjax.system import AbstractSystem
 
 _RULE = "lagjax.scene_parameter"  # the field-metadata key of a parameter's rule
 

@@ -25,10 +25,10 @@ import jax.numpy as jnp
 
 from lagjax.mechanics.hamiltonian import SeparableHamiltonian
 from lagjax.mechanics.lagrangian import Lagrangian
+from lagjax.sampled_signals import zero_crossing_times
 from lagjax.scenes.base import BELOW_THE_TOP, AbstractScene, StateKind, parameter
 from lagjax.scenes.judging import measured
-from lagjax.signals import zero_crossing_times
-from lagjax.special import complete_elliptic_k_from_complement
+from lagjax.special_functions import complete_elliptic_k_from_complement
 
 _DEFAULT_AMPLITUDE = math.radians(150)
 

@@ -35,10 +35,9 @@ from lagjax.rigid.euler_angles import (
 from lagjax.rigid.free_body import free_body_period, symmetric_precession_rate
 from lagjax.rigid.heavy_top import nutation_bounds
 from lagjax.rigid.quaternion import quaternion_to_matrix
-from lagjax.signals import zero_crossing_times
-
-from .base import AbstractScene, StateKind, parameter
-from .judging import measured
+from lagjax.sampled_signals import zero_crossing_times
+from lagjax.scenes.base import AbstractScene, StateKind, parameter
+from lagjax.scenes.judging import measured
 
 
 def euler_rates_from_body_omega(angles: jax.Array, omega_body: jax.Array) -> jax.Array:

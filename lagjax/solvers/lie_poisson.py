@@ -70,6 +70,7 @@ import jax
 import jax.numpy as jnp
 from diffrax import RESULTS, LocalLinearInterpolation
 
+from lagjax._core.terms import RigidBodyTerm, physical_step
 from lagjax.rigid.quaternion import quaternion_multiply
 from lagjax.solvers.compensated import add_to_state, zero_compensation
 from lagjax.solvers.projection import AbstractProjectedSolver
@@ -77,7 +78,6 @@ from lagjax.solvers.projection import AbstractProjectedSolver
 # The composition tables and the kick merging are those of the canonical splitting
 # methods: one source for Yoshida's triple jump.
 from lagjax.solvers.splitting_tables import YOSHIDA4_WEIGHTS, merged_kicks
-from lagjax.terms import RigidBodyTerm, physical_step
 
 if TYPE_CHECKING:
     from typing import ClassVar as AbstractClassVar

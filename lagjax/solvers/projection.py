@@ -41,18 +41,18 @@ import jax.numpy as jnp
 import optimistix as optx
 from jax.flatten_util import ravel_pytree
 
-from lagjax.batch_branch import any_in_batch
-from lagjax.in_step_root_find import root_find_in_step
+from lagjax._core.batch_branch import any_in_batch
+from lagjax._core.precision import match_dtypes, newton_for
+from lagjax._core.terms import ConstrainedLagrangianTerm, unwrap_term
+from lagjax._linalg.in_step_root_find import root_find_in_step
+from lagjax._linalg.small_solves import solve_dense, solve_dense_in_step
 from lagjax.mechanics.constraints import apply_rank_check, least_correction
 from lagjax.mechanics.lagrangian import Lagrangian, singular_check
-from lagjax.mechanics.linalg import solve_dense, solve_dense_in_step
 from lagjax.mechanics.scalar_constraints import (
     scalar_constraints_apply,
     scalar_position_projection,
     scalar_velocity_correction,
 )
-from lagjax.precision import match_dtypes, newton_for
-from lagjax.terms import ConstrainedLagrangianTerm, unwrap_term
 
 
 class AbstractProjectedSolver(diffrax.AbstractWrappedSolver):

@@ -38,19 +38,19 @@ import jax
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
-from lagjax.in_step_root_find import root_find_in_step
-from lagjax.mechanics.constraints import Constraints
-from lagjax.mechanics.lagrangian import Lagrangian
-from lagjax.mechanics.linalg import (
+from lagjax._core.precision import newton_for
+from lagjax._core.terms import RattleTerm, physical_step, unwrap_term
+from lagjax._linalg.in_step_root_find import root_find_in_step
+from lagjax._linalg.small_solves import (
     UNROLLED_SOLVE_LIMIT,
     raise_if_singular,
     solve_dense,
     solve_dense_in_step,
     solve_unrolled,
 )
-from lagjax.precision import newton_for
+from lagjax.mechanics.constraints import Constraints
+from lagjax.mechanics.lagrangian import Lagrangian
 from lagjax.solvers.compensated import add_to_state, zero_compensation
-from lagjax.terms import RattleTerm, physical_step, unwrap_term
 
 
 def _holonomic_constraints(lagrangian: Lagrangian) -> Constraints:

@@ -16,7 +16,7 @@ converges at any step size. Two things set it apart from
 `optimistix.FixedPointIteration`: its state has the
 dtype of the iterate, so float32 stage solves also work when x64 is enabled; and
 its tolerances are floored at what the iterate's dtype can resolve
-(`lagjax.precision.reachable_tolerance`), so the float64 default of 1e-14 becomes
+(`lagjax._core.precision.reachable_tolerance`), so the float64 default of 1e-14 becomes
 ≈ 5e-6 in float32 instead of an unreachable test.
 
 References: Hairer, Lubich & Wanner, *Geometric Numerical Integration*, 2nd ed.,
@@ -33,7 +33,7 @@ import jax.numpy as jnp
 import optimistix as optx
 from jaxtyping import Array, PyTree
 
-from lagjax.precision import reachable_tolerance
+from lagjax._core.precision import reachable_tolerance
 
 
 class _IterationState(eqx.Module):

@@ -32,11 +32,11 @@ import jax
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
-from lagjax.in_step_root_find import root_find_in_step
+from lagjax._core.precision import newton_for
+from lagjax._core.terms import LagrangianTerm, physical_step
+from lagjax._linalg.in_step_root_find import root_find_in_step
 from lagjax.mechanics.lagrangian import Lagrangian
-from lagjax.precision import newton_for
 from lagjax.solvers.compensated import compensated_add, zero_compensation
-from lagjax.terms import LagrangianTerm, physical_step
 
 
 def discrete_lagrangian(

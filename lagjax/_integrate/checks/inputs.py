@@ -1,0 +1,301 @@
+"""Refuse a bad `simulate` call before anything is traced, with the remedy.
+
+`check_simulate_inputs` runs first in `simulate`. It looks only at what is known
+when the call is made — the Python types, the pytree structures and shapes, and the
+values of concrete (not traced) numbers — so it costs nothing in the compiled run
+and nothing at all under `jit`, where the values are tracers and only structures
+are checked. Every refusal names the problem and what to do instead:
+
+| input | refused when | remedy named |
+|---|---|---|
+| `system` | not a lagjax system (a bare function, a class, …) | `Lagrangian(L)`, `Hamiltonian(H)`, `Scene()` |
+| `solver` | a class, a string, a non-solver, an SDE or IMEX solver | `Tsit5()`, a lagjax solver instance |
+| `max_steps` | not a positive integer | a positive `int` or None |
+| `t0`, `t1`, `dt` | NaN, inf, not a real number; `dt = 0`; more than 10⁹ steps | finite times, a larger `dt` |
+| `ts` | NaN, not 1-D, unsorted, outside [t0, t1] | sorted times inside the span |
+| `y0` | not a pair; q and its partner of different structure or shape; NaN/inf; float16; complex or boolean | `(q0, qdot0)` / `(q0, p0)` of matching shapes, float32/64 |
+| `y0` of a `RigidBody` | quaternion not of shape (4,), zero; momentum not (3,) | a unit quaternion, e.g. `(1, 0, 0, 0)` |
+| `rtol`, `atol` | NaN, negative, or both zero | positive tolerances |
+| `y0` of a constrained `Lagrangian` | off the constraints (residuals named) | a start on the manifold |
+
+The `y0` rows are checked in `lagjax._integrate.checks.initial_state`. Integer entries in `y0`
+are accepted (documented) and converted to floats there: `(1, 0)` starts the same
+run as `(1.0, 0.0)`. Half precision (float16, bfloat16) is
+refused rather than promoted: its 3 significant digits cannot meet any stopping
+test of the implicit stage or Legendre solves, and a silent promotion would hide
+that the run is not in the precision asked for.
+
+What cannot be known before the run — a blow-up, a failed stage solve, a
+constraint-violating start — is diagnosed by the loop and `Trajectory.result`.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+import typing
+from typing import Any
+
+import diffrax
+import numpy as np
+from jax.core import Tracer
+
+from lagjax._core.system import AbstractSystem
+from lagjax._core.terms import RattleTerm, RigidBodyTerm
+from lagjax._integrate.checks.initial_state import (
+    check_initial_state,
+    check_scene_state,
+)
+from lagjax.mechanics.lagrangian import Lagrangian
+from lagjax.rigid.body import RigidBody
+from lagjax.scenes.base import AbstractScene
+
+# More steps than this cannot finish in a session (at ~10 ns a step, 10⁹ steps
+# take 10 s for the cheapest system; a typical one takes minutes).
+MAX_FIXED_STEPS = 10**9
+
+_IMEX_SOLVERS = (diffrax.KenCarp3, diffrax.KenCarp4, diffrax.KenCarp5, diffrax.Sil3)
+
+
+def check_simulate_inputs(
+    system: Any,
+    y0: Any,
+    t0: Any,
+    t1: Any,
+    dt: Any,
+    solver: Any,
+    ts: Any,
+    args: Any,
+    max_steps: Any,
+    rtol: Any = 1e-8,
+    atol: Any = 1e-8,
+) -> Any:
+    """Check the arguments of `simulate`; return `y0` with integers made floats.
+
+    Raises `TypeError` (wrong kind of object) or `ValueError` (wrong value) with a
+    message that names the argument, what is wrong and the remedy. Checks that need
+    values are made only for concrete values (not under `jit`/`vmap`).
+    """
+    check_system(system)
+    check_solver(solver)
+    check_solver_fits(_user_system(system), solver)
+    check_max_steps(max_steps)
+    check_tolerances(rtol, atol)
+    check_times(t0, t1, dt)
+    check_save_times(ts, t0, t1)
+    del args  # a scene's parameters are its fields; nothing to check in args
+    y0 = check_initial_state(_user_system(system), y0)
+    if isinstance(system, AbstractScene):
+        check_scene_state(system, y0)
+    return y0
+
+
+def _user_system(system: Any) -> Any:
+    """The system whose convention `y0` follows (a scene's `system()`)."""
+    return system.system() if isinstance(system, AbstractScene) else system
+
+
+def check_system(system: Any) -> None:
+    """`system` must be a lagjax system instance."""
+    if isinstance(system, (AbstractSystem, AbstractScene)):
+        return
+    if isinstance(system, type) and issubclass(system, (AbstractSystem, AbstractScene)):
+        raise TypeError(
+            f"system is the class {system.__name__}, not an instance: pass "
+            f"{system.__name__}(...) (a scene: {system.__name__}() for its defaults)"
+        )
+    if callable(system):
+        raise TypeError(
+            "system is a plain function; simulate needs a lagjax system: wrap it as "
+            "lagjax.Lagrangian(L) for L(q, qdot) or lagjax.Hamiltonian(H) for "
+            "H(q, p) (or pick a scene from lagjax.scenes)"
+        )
+    raise TypeError(
+        f"system must be a lagjax system (Lagrangian, Hamiltonian, "
+        f"SeparableHamiltonian, RigidBody or a scene), got {type(system).__name__}"
+    )
+
+
+def check_solver(solver: Any) -> None:
+    """`solver` must be None or an ODE solver instance (not a class or a name)."""
+    if solver is None:
+        return
+    if isinstance(solver, str):
+        raise TypeError(
+            f"solver must be a solver object, not the string {solver!r}: pass an "
+            "instance such as diffrax.Tsit5() or lagjax.Yoshida4()"
+        )
+    if isinstance(solver, type):
+        raise TypeError(
+            f"solver is the class {solver.__name__}, not an instance: pass "
+            f"{solver.__name__}() (with its arguments, if any)"
+        )
+    if not isinstance(solver, diffrax.AbstractSolver):
+        raise TypeError(
+            f"solver must be a diffrax or lagjax solver instance, got "
+            f"{type(solver).__name__}"
+        )
+    if typing.get_origin(solver.term_structure) is diffrax.MultiTerm:
+        name = type(solver).__name__
+        if isinstance(solver, _IMEX_SOLVERS):
+            raise TypeError(
+                f"{name} is an IMEX solver: it needs the vector field split into "
+                "explicit and implicit terms, which simulate does not make. For a "
+                "stiff system use diffrax.Kvaerno5() (with dt=None)"
+            )
+        raise TypeError(
+            f"{name} is a stochastic (SDE) solver: it needs a diffusion term driven "
+            "by Brownian motion, and lagjax integrates deterministic equations of "
+            "motion. Use an ODE solver: diffrax.Tsit5(), diffrax.Dopri8() or a "
+            "symplectic lagjax solver"
+        )
+
+
+def check_solver_fits(system: Any, solver: Any) -> None:
+    """Solvers written for one kind of system refuse the others by name."""
+    structure = None if solver is None else solver.term_structure
+    if not isinstance(structure, type):
+        return
+    name, kind = type(solver).__name__, type(system).__name__
+    if issubclass(structure, RigidBodyTerm) and not isinstance(system, RigidBody):
+        raise TypeError(
+            f"{name} is a Lie–Poisson solver for a lagjax.RigidBody (state: unit "
+            f"quaternion and body angular momentum); {kind} is not one. Use a solver "
+            "for generalized coordinates (GaussLegendre, Tsit5, a splitting method "
+            "for separable H); a rigid scene gives its body as scene.rigid_body()"
+        )
+    constrained = isinstance(system, Lagrangian) and system.constraints is not None
+    if issubclass(structure, RattleTerm) and not constrained:
+        raise TypeError(
+            f"{name} integrates a constrained Lagrangian, "
+            f"lagjax.Lagrangian(L, constraints=g); {kind} has no constraints. Use "
+            "StormerVerlet (separable H), GaussLegendre or Tsit5"
+        )
+
+
+def check_max_steps(max_steps: Any) -> None:
+    """`max_steps` must be None or a positive integer."""
+    if max_steps is None:
+        return
+    if isinstance(max_steps, bool) or not isinstance(max_steps, numbers.Integral):
+        raise TypeError(
+            f"max_steps must be a positive int or None, got {max_steps!r} "
+            f"({type(max_steps).__name__}); e.g. max_steps=100_000"
+        )
+    if max_steps <= 0:
+        raise ValueError(
+            f"max_steps must be positive, got {max_steps}; pass None for the default "
+            "(the exact count for fixed steps, 10⁵ adaptive)"
+        )
+
+
+def check_tolerances(rtol: Any, atol: Any) -> None:
+    """`rtol` and `atol` must be finite, non-negative and not both zero."""
+    values = {
+        "rtol": _concrete_scalar(rtol, "rtol"),
+        "atol": _concrete_scalar(atol, "atol"),
+    }
+    for name, value in values.items():
+        if value is not None and not (math.isfinite(value) and value >= 0):
+            raise ValueError(
+                f"{name} must be a finite non-negative number, got {value}; the "
+                "default 1e-8 suits most runs"
+            )
+    if values["rtol"] == 0 and values["atol"] == 0:
+        raise ValueError(
+            "rtol and atol are both 0: no step could ever be accepted; give at least "
+            "one a positive value (e.g. rtol=1e-10, atol=1e-12)"
+        )
+
+
+def check_times(t0: Any, t1: Any, dt: Any) -> None:
+    """Finite real times; a finite, non-zero `dt` that does not ask for ≥ 10⁹ steps."""
+    start, end = _concrete_scalar(t0, "t0"), _concrete_scalar(t1, "t1")
+    step = None if dt is None else _concrete_scalar(dt, "dt")
+    for name, value in (("t0", start), ("t1", end), ("dt", step)):
+        if value is not None and not math.isfinite(value):
+            raise ValueError(
+                f"{name} = {value} is not a finite number; the times of a run must "
+                "be finite (a NaN often comes from a computed time: check it)"
+            )
+    if step is None:
+        return
+    if step == 0:
+        raise ValueError(
+            f"dt must be a finite non-zero number, got {step}: pass a step dt > 0 "
+            "(or dt=None for adaptive stepping)"
+        )
+    if start is None or end is None:
+        return
+    steps = abs(end - start) / abs(step)
+    if steps > MAX_FIXED_STEPS:
+        raise ValueError(
+            f"dt = {step:g} over [{start:g}, {end:g}] means {steps:.3g} steps, more "
+            f"than {MAX_FIXED_STEPS:.0e}: the run would never finish. Pass a larger "
+            "dt (the scene's own scale is usually 1e-3 to 1e-2 of a period), or "
+            "dt=None for adaptive stepping"
+        )
+
+
+def check_save_times(ts: Any, t0: Any, t1: Any) -> None:
+    """`ts`: finite, 1-D, non-empty, ordered from t0 towards t1, inside the span."""
+    if ts is None or isinstance(ts, Tracer):
+        return
+    try:
+        times = np.asarray(ts, dtype=float)
+    except (TypeError, ValueError):
+        raise TypeError(
+            f"ts must be an array of times, got {type(ts).__name__}"
+        ) from None
+    if times.ndim != 1 or times.size == 0:
+        raise ValueError(
+            f"ts must be a non-empty 1-D array of times, got shape {times.shape}; "
+            "e.g. ts=jnp.linspace(t0, t1, 101)"
+        )
+    bad = np.flatnonzero(~np.isfinite(times))
+    if bad.size:
+        raise ValueError(
+            f"ts[{bad[0]}] = {times[bad[0]]} is not a finite time; every save time "
+            "must be a finite number inside [t0, t1]"
+        )
+    start, end = _concrete_scalar(t0, "t0"), _concrete_scalar(t1, "t1")
+    if start is None or end is None:
+        return
+    direction = 1.0 if end >= start else -1.0
+    if np.any(np.diff(times) * direction < 0):
+        order = "increasing" if direction > 0 else "decreasing (t1 < t0)"
+        raise ValueError(
+            f"ts must be sorted, {order}; got {times[:6].tolist()}… — pass np.sort(ts)"
+        )
+    low, high = min(start, end), max(start, end)
+    outside = np.flatnonzero((times < low) | (times > high))
+    if outside.size:
+        k = outside[0]
+        raise ValueError(
+            f"ts[{k}] = {times[k]} lies outside [t0, t1] = [{start}, {end}]; save "
+            "times must lie inside the run (extend t1 or drop that time)"
+        )
+
+
+def _concrete_scalar(value: Any, name: str) -> float | None:
+    """`value` as a Python float, or None when it is traced."""
+    if isinstance(value, Tracer):
+        return None
+    if isinstance(value, (bool, str)):
+        raise TypeError(f"{name} must be a real number, got {value!r}")
+    try:
+        array = np.asarray(value)
+    except (TypeError, ValueError):
+        raise TypeError(
+            f"{name} must be a real number, got {type(value).__name__}"
+        ) from None
+    if array.shape != ():
+        raise ValueError(
+            f"{name} must be a scalar, got an array of shape {array.shape}"
+        )
+    if not (
+        np.issubdtype(array.dtype, np.floating)
+        or np.issubdtype(array.dtype, np.integer)
+    ):
+        raise TypeError(f"{name} must be a real number, got {value!r}")
+    return float(array)

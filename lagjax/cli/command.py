@@ -1,0 +1,434 @@
+"""The `lagjax` command: list scenes, run one, and report what it did.
+
+    lagjax scenes
+    lagjax run SCENE [--t1 T] [--dt DT] [--solver NAME] [--param k=v ...]
+                     [--batch N] [--plot out.png] [--save out.npz] [--backward]
+    lagjax bench [--quick]
+
+The command never shows a traceback. Bad arguments — an unknown scene or solver, a
+parameter out of its physical range (`--param mass=-1`), a non-finite or hopeless
+step (`--dt nan`, `--dt 1e-300`), an output path that cannot be written — are
+refused *before* anything is compiled, with exit status 2 and one line
+`lagjax: error: …` naming the problem. A run that fails (a singular mass matrix, a
+stage solve that does not converge) exits with status 1 and says why. Ctrl-C stops
+a run cleanly (status 130): long runs go in chunks, and the states computed up to
+the interrupt are still saved when `--save` asked for them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import logging
+import math
+import os
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any, NoReturn
+
+import diffrax
+import jax
+import numpy as np
+
+from lagjax import scenes as scene_catalog
+from lagjax._core.cpu_loops import enable_fast_cpu_loops
+from lagjax._integrate.checks.inputs import check_times
+from lagjax.cli.run import Outcome, UsageError, first_line, run_scene
+from lagjax.solvers.implicit import (
+    AbstractGaussLegendre,
+    GaussLegendre,
+    ImplicitMidpoint,
+    stage_failure_message,
+)
+from lagjax.solvers.lie_poisson import RigidBodyVerlet, RigidBodyYoshida4
+from lagjax.solvers.rattle import Rattle
+from lagjax.solvers.splitting import (
+    BlanesMoan4,
+    BlanesMoan6,
+    BlanesMoanNystrom6,
+    KahanLi8,
+    SofSpa10,
+    StormerVerlet,
+    Yoshida4,
+    Yoshida6,
+)
+from lagjax.solvers.variational import VariationalMidpoint
+
+SOLVERS: dict[str, Callable[[], diffrax.AbstractSolver]] = {
+    "StormerVerlet": StormerVerlet,
+    "Yoshida4": Yoshida4,
+    "Yoshida6": Yoshida6,
+    "KahanLi8": KahanLi8,
+    "SofSpa10": SofSpa10,
+    "BlanesMoan4": BlanesMoan4,
+    "BlanesMoan6": BlanesMoan6,
+    "BlanesMoanNystrom6": BlanesMoanNystrom6,
+    "ImplicitMidpoint": ImplicitMidpoint,
+    "GaussLegendre1": lambda: GaussLegendre(stages=1),
+    "GaussLegendre2": lambda: GaussLegendre(stages=2),
+    "GaussLegendre3": lambda: GaussLegendre(stages=3),
+    "VariationalMidpoint": VariationalMidpoint,
+    "Tsit5": diffrax.Tsit5,
+    "Dopri5": diffrax.Dopri5,
+    "Dopri8": diffrax.Dopri8,
+    "Kvaerno5": diffrax.Kvaerno5,
+    "RigidBodyVerlet": RigidBodyVerlet,
+    "RigidBodyYoshida4": RigidBodyYoshida4,
+    "Rattle": Rattle,
+}
+INTERRUPTED = 130  # the shell's status for a run stopped by SIGINT
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> NoReturn:
+        raise UsageError(message)
+
+
+# -- arguments ---------------------------------------------------------------------
+
+
+def _parse_param(text: str) -> tuple[str, np.ndarray]:
+    """`NAME=VALUE` or `NAME=V1,V2,V3` (a vector parameter), finite numbers only."""
+    name, sep, value = text.partition("=")
+    if not sep or not name:
+        raise UsageError(f"--param expects NAME=VALUE, got {text!r}")
+    try:
+        numbers = [float(part) for part in value.split(",")]
+    except ValueError:
+        raise UsageError(f"--param {name}: {value!r} is not a number") from None
+    if not all(math.isfinite(x) for x in numbers):
+        raise UsageError(f"--param {name}={value}: parameters must be finite numbers")
+    return name, np.asarray(numbers if len(numbers) > 1 else numbers[0])
+
+
+def _build_scene(name: str, params: Sequence[str]):
+    catalog = scene_catalog.catalog()
+    if name not in catalog:
+        raise UsageError(f"unknown scene {name!r}; `lagjax scenes` lists them")
+    scene_class = catalog[name]
+    values = dict(_parse_param(text) for text in params)
+    default = scene_class()
+    fields = {field.name for field in dataclasses.fields(scene_class)}
+    for key, value in values.items():
+        if key not in fields:
+            known = ", ".join(sorted(fields)) or "none"
+            raise UsageError(
+                f"scene {name} has no parameter {key!r} (unexpected keyword); its "
+                f"parameters: {known}"
+            )
+        expected = np.shape(getattr(default, key))
+        if value.shape != expected:
+            raise UsageError(
+                f"--param {key}: scene {name} needs {_shape_words(expected)}, got "
+                f"{_shape_words(value.shape)}"
+                + (f"; e.g. {key}=1,2,3" if expected == (3,) else "")
+            )
+    try:
+        return scene_class(**values)
+    except (ValueError, TypeError) as error:
+        given = " ".join(f"{k}={_format(v)}" for k, v in values.items())
+        raise UsageError(f"--param {given}: {first_line(error)}") from None
+
+
+def _shape_words(shape: tuple[int, ...]) -> str:
+    if shape == ():
+        return "one number"
+    count = int(np.prod(shape))
+    return f"{count} comma-separated numbers"
+
+
+def _options(scene, args) -> tuple[float, float | None, Any]:
+    t1 = scene.default_t1 if args.t1 is None else args.t1
+    dt = scene.default_dt if args.dt is None else args.dt
+    for flag, value in (("--t1", t1), ("--dt", dt)):
+        if value is not None and not math.isfinite(value):
+            raise UsageError(f"{flag} must be a finite number, got {value}")
+    if dt is not None and dt <= 0:
+        raise UsageError(
+            f"--dt must be positive, got {dt} (use --backward to run back)"
+        )
+    if t1 == 0:
+        raise UsageError("--t1 must be non-zero: the run goes from t = 0 to t1")
+    if t1 < 0 and not args.backward:
+        raise UsageError(
+            f"--t1 {t1} is before t0 = 0; pass --backward to run backwards"
+        )
+    if args.backward:
+        t1, dt = -abs(t1), None if dt is None else -abs(dt)
+    try:
+        check_times(0.0, t1, dt)
+    except ValueError as error:
+        message = str(error).replace("dt = ", "--dt ", 1)
+        raise UsageError(
+            message.replace(", or dt=None for adaptive stepping", "")
+        ) from None
+    if args.solver is not None and args.solver not in SOLVERS:
+        raise UsageError(
+            f"unknown solver {args.solver!r}; choose from {', '.join(SOLVERS)}"
+        )
+    solver = None if args.solver is None else SOLVERS[args.solver]()
+    if args.batch is not None and args.batch < 1:
+        raise UsageError(f"--batch must be at least 1, got {args.batch}")
+    return t1, dt, solver
+
+
+def _check_output(path: str | None, flag: str) -> None:
+    """Refuse, before the run, an output path that cannot be written."""
+    if path is None:
+        return
+    target = Path(path)
+    if path == "" or target.is_dir():
+        raise UsageError(f"{flag} {path!r} is a directory; give a file name")
+    parent = target.parent if str(target.parent) else Path(".")
+    if not parent.is_dir():
+        raise UsageError(f"{flag} {path}: the folder {parent} does not exist")
+    if not os.access(parent, os.W_OK) or (
+        target.exists() and not os.access(target, os.W_OK)
+    ):
+        raise UsageError(f"{flag} {path}: not writable")
+    if flag == "--plot":
+        _check_plot_format(target, flag)
+
+
+def _check_plot_format(target: Path, flag: str) -> None:
+    try:
+        import matplotlib
+    except ImportError:
+        raise UsageError(
+            f"{flag} needs matplotlib: pip install matplotlib (or lagjax[plot])"
+        ) from None
+    matplotlib.use("Agg")
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    formats = FigureCanvasBase.get_supported_filetypes()
+    suffix = target.suffix.lstrip(".").lower()
+    if suffix not in formats:
+        raise UsageError(
+            f"{flag} {target}: unknown image format {suffix!r}; use one of "
+            f"{', '.join(sorted(formats))} (e.g. run.png)"
+        )
+
+
+# -- reporting ---------------------------------------------------------------------
+
+
+def _first_of_batch(trajectory, batch: int | None):
+    if batch is None:
+        return trajectory
+    return jax.tree_util.tree_map(lambda x: x[0], trajectory)
+
+
+def _summary(scene, name: str, outcome: Outcome, batch: int | None) -> list[str]:
+    first = _first_of_batch(outcome.trajectory, batch)
+    energy = np.asarray(first.energy())
+    scale = max(abs(energy[0]), 1e-300)
+    lines = [
+        f"scene     {name}: {first_line((type(scene).__doc__ or '').strip())}",
+        f"solver    {first.stats['solver']}, {outcome.steps} steps"
+        + ("" if batch is None else f", batch of {batch}"),
+        f"time      run {outcome.run_time:.3f} s (excluding compile), "
+        f"compile {outcome.compile_time:.2f} s",
+        f"energy    max relative error {np.max(np.abs(energy - energy[0])) / scale:.2e}",
+    ]
+    try:
+        checks = scene.checks(first)
+    except ValueError as refusal:  # the run is too short or too coarse to judge
+        lines.append(f"check     not judged: {refusal}")
+        checks = {}
+    for check, (measured, expected) in checks.items():
+        measured, expected = np.asarray(measured), np.asarray(expected)
+        # One scale for the whole quantity: components that are zero in the closed
+        # form (a vector's y-part, say) must not blow the relative error up.
+        scale = max(float(np.max(np.abs(expected))), 1e-300)
+        error = float(np.max(np.abs(measured - expected))) / scale
+        if measured.size <= 3:
+            shown = f"{_format(measured)} vs closed form {_format(expected)}"
+        else:
+            shown = f"{measured.size} values along the run vs closed form"
+        lines.append(f"check     {check}: {shown} (rel. error {error:.1e})")
+    return lines
+
+
+def _format(values: Any) -> str:
+    flat = [f"{float(x):.10g}" for x in np.ravel(values)]
+    return flat[0] if len(flat) == 1 else "(" + ", ".join(flat) + ")"
+
+
+def _save(path: str, trajectory) -> None:
+    """Write the run to exactly `path` (np.savez would append `.npz` to a name)."""
+    q_leaves = jax.tree_util.tree_leaves(trajectory.q)
+    second = jax.tree_util.tree_leaves(trajectory.ys[1])
+    arrays = {
+        "ts": np.asarray(trajectory.ts),
+        "energy": np.asarray(trajectory.energy()),
+    }
+    arrays.update({f"q{i}": np.asarray(x) for i, x in enumerate(q_leaves)})
+    label = "p" if trajectory.is_hamiltonian else "qdot"
+    arrays.update({f"{label}{i}": np.asarray(x) for i, x in enumerate(second)})
+    with open(path, "wb") as file:
+        np.savez(file, **arrays)  # pyright: ignore[reportArgumentType]
+
+
+# -- commands ----------------------------------------------------------------------
+
+
+def _command_run(args) -> int:
+    scene = _build_scene(args.scene, args.param)
+    t1, dt, solver = _options(scene, args)
+    _check_output(args.plot, "--plot")
+    _check_output(args.save, "--save")
+    try:
+        outcome = run_scene(scene, t1, dt, solver, args.batch)
+    except (UsageError, KeyboardInterrupt):
+        raise
+    except Exception as error:
+        raise RunFailed(_reason(error, scene, solver, dt)) from None
+    first = _first_of_batch(outcome.trajectory, args.batch)
+    if outcome.interrupted:
+        reached = float(np.asarray(first.ts)[-1])
+        saved = ""
+        if args.save:
+            _save(args.save, first)
+            saved = f"; the {np.size(first.ts)} states up to there are in {args.save}"
+        print(
+            f"lagjax: interrupted at t = {reached:.6g} of {t1:g}{saved}",
+            file=sys.stderr,
+        )
+        return INTERRUPTED
+    for line in _summary(scene, args.scene, outcome, args.batch):
+        print(line)
+    if args.save:  # data first: a failing plot must not lose the run
+        _save(args.save, first)
+        print(f"data      {args.save}")
+    if args.plot:
+        from lagjax.cli.plot import plot_run
+
+        plot_run(args.plot, args.scene, scene, first)
+        print(f"plot      {args.plot}")
+    return 0
+
+
+def _command_scenes(_args) -> int:
+    print(scene_catalog.describe())
+    return 0
+
+
+def _command_bench(args) -> int:
+    """Run the work-precision benchmark of a clone of the repository."""
+    import subprocess
+
+    root = Path(__file__).resolve().parent.parent.parent
+    if not (root / "benchmarks" / "work_precision.py").exists():
+        raise UsageError(
+            "`lagjax bench` runs the benchmarks/ folder of a clone of the "
+            "repository, which an installed wheel does not contain: clone the "
+            "repository and run `python -m benchmarks.work_precision` in it"
+        )
+    command = [sys.executable, "-m", "benchmarks.work_precision"]
+    return subprocess.call(command + (["--quick"] if args.quick else []), cwd=root)
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="lagjax", description="Classical mechanics in JAX.")
+    commands = parser.add_subparsers(
+        dest="command", required=True, parser_class=_Parser
+    )
+    commands.add_parser("scenes", help="list the scenes").set_defaults(
+        handler=_command_scenes
+    )
+    run = commands.add_parser("run", help="integrate a scene and report")
+    run.add_argument("scene")
+    run.add_argument("--t1", type=float, default=None, help="end time [s]")
+    run.add_argument("--dt", type=float, default=None, help="fixed step [s]")
+    run.add_argument("--solver", default=None, help=f"one of: {', '.join(SOLVERS)}")
+    run.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        help="scene parameter NAME=VALUE (a vector: NAME=V1,V2,V3)",
+    )
+    run.add_argument(
+        "--batch", type=int, default=None, help="run N perturbed copies (vmap)"
+    )
+    run.add_argument(
+        "--plot", default=None, help="write a figure (PNG, PDF, SVG) of the run"
+    )
+    run.add_argument("--save", default=None, help="write the trajectory as .npz")
+    run.add_argument("--backward", action="store_true", help="integrate towards t1 < 0")
+    run.set_defaults(handler=_command_run)
+    bench = commands.add_parser(
+        "bench", help="run the benchmark report (needs a clone)"
+    )
+    bench.add_argument("--quick", action="store_true")
+    bench.set_defaults(handler=_command_bench)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command; return its exit status (0 done, 1 run failed, 2 bad
+    arguments, 130 interrupted). Never raises, never prints a traceback."""
+    # JAX logs a traceback of its own when a run-time check fires inside a compiled
+    # run; the command reports the reason in one line instead.
+    logging.getLogger("jax._src.callback").setLevel(logging.CRITICAL)
+    # The command is a program of its own: float64 throughout, and whole loop
+    # bodies as one kernel on CPU (both are the caller's choice in a library call).
+    enable_fast_cpu_loops()
+    jax.config.update("jax_enable_x64", True)
+    try:
+        args = _parser().parse_args(argv)
+        return args.handler(args)
+    except SystemExit as done:  # --help
+        return done.code if isinstance(done.code, int) else 0
+    except UsageError as error:
+        _error(str(error))
+        return 2
+    except KeyboardInterrupt:
+        _error("interrupted before any state was computed; nothing saved")
+        return INTERRUPTED
+    except RunFailed as error:
+        _error(f"run failed: {error}")
+        return 1
+    except Exception as error:  # anything else: still one line, never a traceback
+        _error(f"run failed: {_reason(error)}")
+        return 1
+
+
+def _error(message: str) -> None:
+    print(f"lagjax: error: {first_line(message)}", file=sys.stderr)
+
+
+class RunFailed(Exception):
+    """A run that started and failed: reported in one line, exit status 1."""
+
+
+def _reason(error: Exception, scene=None, solver=None, dt=None) -> str:
+    """The line of an (often long, JIT-wrapped) error message that says what failed;
+    for a failed implicit stage solve, what to change (`stage_failure_message`)."""
+    text = str(error)
+    if scene is not None and ("nonlinear solver" in text or "Nonfinite" in text):
+        chosen = solver if solver is not None else scene.default_solver(dt)
+        if isinstance(chosen, AbstractGaussLegendre):
+            return stage_failure_message(chosen)
+    lines = [line.strip() for line in str(error).splitlines() if line.strip()]
+    keywords = (
+        "singular",
+        "non-finite",
+        "Nonfinite",
+        "maximum number of steps",
+        "nonlinear solver",
+        "diverge",
+    )
+    # equinox's run-time errors carry the reason after the class name, below a
+    # copy of the stack; skip the stack's file and code lines.
+    for line in lines:
+        if "RuntimeError: " in line:
+            return line.split("RuntimeError: ", 1)[1]
+    for line in lines:
+        if any(word in line for word in keywords) and not line.startswith("File "):
+            return line
+    return f"{type(error).__name__}: {lines[0] if lines else ''}"
+
+
+if __name__ == "__main__":
+    sys.exit(main())
