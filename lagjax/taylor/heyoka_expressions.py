@@ -1,0 +1,182 @@
+r"""A JAX vector field as a system of heyoka expressions, read off its jaxpr.
+
+heyoka (Biscani & Izzo 2021) integrates ODEs written in its own expression system by
+Taylor's method: it decomposes the right-hand side into elementary operations and
+compiles, with LLVM, the recurrences that give each operation's Taylor coefficients
+from its operands' (Jorba & Zou 2005). lagjax's derived equations of motion are
+already such a sequence of elementary operations — the jaxpr of
+`vector_field(t, y, args)` — so the translation is a walk over that jaxpr in which
+every value is a NumPy array whose elements are heyoka expressions or numbers:
+
+- the state `y` becomes heyoka variables, `t` becomes `heyoka.time`, and every
+  scalar of `args` a runtime parameter `heyoka.par[i]` (a new value of `args` needs
+  no new compilation);
+- an equation whose operands are all numbers is evaluated by JAX itself, so
+  indices, iotas and constant tables keep JAX's exact meaning;
+- arithmetic and elementary functions map element by element onto heyoka's, `where`
+  and comparisons onto `heyoka.select` and its relational operators (the unselected
+  branch never leaks: lagjax's NaN-poisoning `where(singular, nan, x)` stays exact);
+- a data-movement primitive (slice, reshape, gather, scatter, concatenate, …) is
+  applied by JAX to an array of element indices, and the result picks the elements;
+- calls (`jit`, `custom_jvp`, `custom_vjp`, `checkpoint`) are entered, a `scan` of
+  fixed length is unrolled, a `while_loop` is unrolled while its condition is a
+  number, a `cond` with a numeric index takes its branch and one with a
+  state-dependent index becomes a select over all branches.
+
+A branch of a state-dependent `cond` that cannot be translated (lagjax's pivoted-LU
+fallback behind its unrolled factorizations) is replaced by NaN: a run that reaches a
+state needing it stops as non-finite, never silently wrong; the translation records
+which primitive it met (`HeyokaSystem.poisoned`). Any other primitive outside these
+rules is refused by name (`UnsupportedPrimitiveError`).
+
+References: F. Biscani & D. Izzo, "Revisiting high-order Taylor methods for
+astrodynamics and celestial mechanics", MNRAS 504 (2021) 2614; À. Jorba & M. Zou,
+"A software package for the numerical integration of ODEs by means of high-order
+Taylor methods", Experimental Mathematics 14 (2005) 99; the JAX documentation,
+"Writing custom Jaxpr interpreters in JAX".
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import jax
+import jax.extend as jex
+import jax.numpy as jnp
+import numpy as np
+
+from lagjax._linalg.jaxpr_interpreter import evaluate_jaxpr
+from lagjax.taylor.heyoka_rules import (
+    CONTROL_RULES,
+    DATA_MOVES,
+    SYMBOLIC_RULES,
+    UnsupportedPrimitiveError,
+    as_expression,
+    bind,
+    element_map,
+    elementwise_rules,
+    move,
+    symbolic,
+)
+
+# Calls whose inner jaxpr is evaluated in place, and the parameter that holds it.
+INNER_JAXPR = {
+    "custom_jvp_call": "call_jaxpr",
+    "custom_vjp_call": "call_jaxpr",
+    "custom_vjp_call_jaxpr": "fun_jaxpr",
+    "custom_vmap_call": "call",
+    "remat2": "jaxpr",
+    "checkpoint": "jaxpr",
+}
+
+
+@dataclass(frozen=True)
+class HeyokaSystem:
+    """The ODE system `y' = f(t, y, args)` in heyoka's expressions.
+
+    - `equations`: ((y_i, f_i), ...) as `heyoka.taylor_adaptive` takes them.
+    - `num_pars`: how many scalars `args` holds (`heyoka.par[0 … num_pars-1]`).
+    - `poisoned`: primitives of state-dependent `cond` branches replaced by NaN.
+    """
+
+    equations: tuple[tuple[Any, Any], ...]
+    num_pars: int
+    poisoned: tuple[str, ...]
+
+
+def import_heyoka() -> Any:
+    """heyoka, or an ImportError that says how to install it (an optional peer)."""
+    try:
+        import heyoka
+    except ImportError as error:
+        raise ImportError(
+            "lagjax's heyoka backend needs the optional package heyoka: "
+            "`pip install heyoka` (or `pip install lagjax[heyoka]`)."
+        ) from error
+    return heyoka
+
+
+def flatten_args(args: Any) -> np.ndarray:
+    """Every scalar of the pytree `args`, in the order of `heyoka.par[i]`."""
+    leaves = jax.tree_util.tree_leaves(args)
+    if not leaves:
+        return np.zeros(0)
+    return np.concatenate([np.ravel(np.asarray(leaf, dtype=float)) for leaf in leaves])
+
+
+def jaxpr_to_heyoka(
+    vector_field: Callable[[Any, Any, Any], Any], n: int, args_example: Any = None
+) -> HeyokaSystem:
+    """Translate `vector_field(t, y, args)` (y of shape (n,), returning shape (n,))
+    into heyoka's expressions; `args_example` gives the structure and shapes of
+    `args` (its values are not used: each scalar becomes a heyoka parameter).
+
+    Raises `UnsupportedPrimitiveError`, naming the primitive, for a vector field
+    that heyoka's expression system cannot express.
+    """
+    hy = import_heyoka()
+    closed = jax.make_jaxpr(vector_field)(
+        jnp.zeros((), float), jnp.zeros((n,), float), args_example
+    )
+    (out_aval,) = closed.out_avals
+    if tuple(out_aval.shape) != (n,):
+        raise ValueError(
+            f"vector_field must return an array of shape ({n},) for a state of shape "
+            f"({n},); it returned shape {tuple(out_aval.shape)}."
+        )
+    states = [hy.make_vars(f"y{i}") for i in range(n)]
+    inputs = [_objects([hy.time], ()), _objects(states, (n,))]
+    offset = 0
+    for leaf in jax.tree_util.tree_leaves(args_example):
+        size = int(np.size(leaf))
+        inputs.append(
+            _objects([hy.par[offset + i] for i in range(size)], np.shape(leaf))
+        )
+        offset += size
+    walk = _Walk(hy)
+    (out,) = walk.evaluate(closed.jaxpr, closed.consts, inputs)
+    rhs = [as_expression(hy, e) for e in np.asarray(out, dtype=object).ravel()]
+    return HeyokaSystem(tuple(zip(states, rhs)), offset, tuple(walk.poisoned))
+
+
+def _objects(elements: Sequence[Any], shape: Sequence[int]) -> np.ndarray:
+    array = np.empty(len(elements), dtype=object)
+    array[:] = list(elements)
+    return array.reshape(tuple(shape))
+
+
+class _Walk:
+    """One translation: heyoka, and the poisoned branches met so far."""
+
+    def __init__(self, hy: Any) -> None:
+        self.hy = hy
+        self.elementwise = elementwise_rules(hy)
+        self.poisoned: list[str] = []
+
+    def evaluate(self, jaxpr: Any, consts: Sequence[Any], inputs: Sequence[Any]):
+        return evaluate_jaxpr(
+            jaxpr, consts, inputs, self.rule, literal=np.asarray, const=np.asarray
+        )
+
+    def enter(self, inner: Any, operands: Sequence[Any]) -> list[Any]:
+        if isinstance(inner, jex.core.ClosedJaxpr):
+            return self.evaluate(inner.jaxpr, inner.consts, operands)
+        return self.evaluate(inner, [], operands)
+
+    def rule(self, eqn: Any, operands: list[Any]) -> Sequence[Any]:
+        name = eqn.primitive.name
+        if not any(symbolic(x) for x in operands):
+            return bind(eqn, operands)
+        if name in INNER_JAXPR:
+            return self.enter(eqn.params[INNER_JAXPR[name]], operands)
+        if name in CONTROL_RULES:
+            return CONTROL_RULES[name](self, eqn, operands)
+        if name in DATA_MOVES and not (name == "select_n" and symbolic(operands[0])):
+            return move(eqn, operands, DATA_MOVES[name](len(operands)))
+        if name in SYMBOLIC_RULES:
+            return SYMBOLIC_RULES[name](self, eqn, operands)
+        if name in self.elementwise:
+            return [element_map(self.elementwise[name], operands)]
+        raise UnsupportedPrimitiveError(name)

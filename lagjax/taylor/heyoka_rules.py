@@ -1,0 +1,487 @@
+r"""How each JAX primitive of a vector field becomes heyoka expressions.
+
+The rules of the jaxpr walk in `heyoka_expressions`. A value is a NumPy array: of
+numbers where it does not depend on the state, of objects (heyoka expressions or
+numbers) where it does. Four kinds of rule, tried in this order:
+
+1. **Numbers only** — the equation is evaluated by JAX itself (`_bind`), so integer
+   indexing, iotas and constant tables mean exactly what they mean in JAX.
+2. **Data movement** (`DATA_MOVES`: slice, reshape, broadcast, gather, scatter,
+   concatenate, pad, a select with a numeric predicate, …) — JAX applies the
+   primitive to an array of element indices and the result picks the elements
+   (`_move`); the index operands must be numbers.
+3. **Element maps** (`elementwise_rules`): heyoka's arithmetic, elementary functions
+   and relational operators; NumPy's where every operand is a number. `abs`, `max`,
+   `min` and `sign` are `heyoka.select`s on comparisons (piecewise smooth: their
+   Taylor coefficients are those of the selected branch).
+4. **Structured rules** (`SYMBOLIC_RULES`, `CONTROL_RULES`): `integer_pow`,
+   `convert_element_type`, `select_n`, `dot_general`, reductions and cumulative
+   sums, and control flow — `cond`, `scan` and `while`.
+
+References: F. Biscani & D. Izzo, "Revisiting high-order Taylor methods for
+astrodynamics and celestial mechanics", MNRAS 504 (2021) 2614 (heyoka's expression
+system and `select`); the JAX documentation, `jax.lax` (the primitives' semantics).
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable, Sequence
+from typing import Any, Protocol
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+MAX_UNROLL = 100_000  # iterations of a scan or while_loop unrolled at most
+
+# Primitives that only move elements: the operand positions that hold data (the
+# others — indices, start positions, predicates — must be numbers).
+_SINGLE_DATA_OPERAND = (
+    "slice",
+    "squeeze",
+    "reshape",
+    "broadcast_in_dim",
+    "transpose",
+    "rev",
+    "expand_dims",
+    "gather",
+    "dynamic_slice",
+    "split",
+    "copy",
+    "copy_p",
+)
+DATA_MOVES: dict[str, Callable[[int], Sequence[int]]] = {
+    **dict.fromkeys(_SINGLE_DATA_OPERAND, lambda k: (0,)),
+    "concatenate": range,
+    "stack": range,
+    "pad": lambda k: (0, 1),
+    "scatter": lambda k: (0, 2),
+    "dynamic_update_slice": lambda k: (0, 1),
+    "select_n": lambda k: range(1, k),
+}
+
+
+class UnsupportedPrimitiveError(NotImplementedError):
+    """A primitive of the vector field that heyoka's expressions cannot express."""
+
+    def __init__(self, primitive: str, why: str = "") -> None:
+        self.primitive = primitive
+        reason = f" ({why})" if why else ""
+        super().__init__(
+            f"the heyoka backend cannot translate the JAX primitive `{primitive}`"
+            f"{reason}. Integrate this system with lagjax's own solvers "
+            "(lj.simulate, or the JAX-native lj.Taylor) instead."
+        )
+
+
+class Walk(Protocol):
+    """What a rule may ask of the translation in progress."""
+
+    hy: Any
+    poisoned: list[str]
+
+    def evaluate(
+        self, jaxpr: Any, consts: Sequence[Any], inputs: Sequence[Any]
+    ) -> list[Any]: ...
+
+    def enter(self, inner: Any, operands: Sequence[Any]) -> list[Any]: ...
+
+
+def symbolic(value: Any) -> bool:
+    """Whether `value` depends on the state (an array of objects)."""
+    return isinstance(value, np.ndarray) and value.dtype == object
+
+
+def as_expression(hy: Any, element: Any) -> Any:
+    if isinstance(element, hy.expression):
+        return element
+    return hy.expression(float(element))
+
+
+# Equations on numbers that NumPy evaluates with JAX's meaning (cast to JAX's
+# output dtype), sparing an XLA compilation per new shape and parameter.
+NUMPY_ARITHMETIC: dict[str, Callable[..., Any]] = {
+    "add": np.add,
+    "sub": np.subtract,
+    "mul": np.multiply,
+    "neg": np.negative,
+    "max": np.maximum,
+    "min": np.minimum,
+    "eq": np.equal,
+    "ne": np.not_equal,
+    "lt": np.less,
+    "le": np.less_equal,
+    "gt": np.greater,
+    "ge": np.greater_equal,
+    "and": np.bitwise_and,
+    "or": np.bitwise_or,
+    "not": np.invert,
+    "convert_element_type": lambda x: x,
+    "select_n": lambda p, *cases: np.choose(np.asarray(p, int), cases),
+}
+
+
+def bind(eqn: Any, operands: Sequence[Any]) -> list[np.ndarray]:
+    """An equation on numbers only: evaluated as JAX evaluates it — by NumPy where
+    the two agree, else by JAX itself."""
+    name = eqn.primitive.name
+    if name in NUMPY_MOVES and not (name == "reshape" and eqn.params.get("dimensions")):
+        out = NUMPY_MOVES[name](eqn.params, *[np.asarray(x) for x in operands])
+        return [np.asarray(x) for x in (out if isinstance(out, list) else [out])]
+    if name in NUMPY_ARITHMETIC:
+        dtype = eqn.outvars[0].aval.dtype
+        return [np.asarray(NUMPY_ARITHMETIC[name](*operands)).astype(dtype)]
+    return jax_bind(eqn, operands)
+
+
+def jax_bind(eqn: Any, operands: Sequence[Any]) -> list[np.ndarray]:
+    out = eqn.primitive.bind(*operands, **eqn.params)
+    outs = out if eqn.primitive.multiple_results else [out]
+    return [np.asarray(x) for x in outs]
+
+
+def move(eqn: Any, operands: Sequence[Any], data: Sequence[int]) -> list[np.ndarray]:
+    """A data-movement primitive: by NumPy where it has the same operation, else
+    applied by JAX to element indices, the result picking the elements."""
+    name, p = eqn.primitive.name, eqn.params
+    if name in NUMPY_MOVES and not (name == "reshape" and p.get("dimensions")):
+        out = NUMPY_MOVES[name](p, *[object_array(x) for x in operands])
+        return [object_array(x) for x in (out if isinstance(out, list) else [out])]
+    pool, indexed, offset = [], list(operands), 0
+    for i, operand in enumerate(operands):
+        if i in data:
+            values = np.asarray(operand, dtype=object)
+            indexed[i] = jnp.arange(offset, offset + values.size).reshape(values.shape)
+            pool.append(values.ravel())
+            offset += values.size
+        elif symbolic(operand):
+            raise UnsupportedPrimitiveError(
+                eqn.primitive.name, "an index or position that depends on the state"
+            )
+    elements = np.concatenate(pool)
+    return [
+        elements[index.ravel()].reshape(index.shape) for index in jax_bind(eqn, indexed)
+    ]
+
+
+def _slice(p: dict, x: np.ndarray) -> np.ndarray:
+    strides = p["strides"] or [1] * x.ndim
+    bounds = zip(p["start_indices"], p["limit_indices"], strides)
+    return x[tuple(slice(*bound) for bound in bounds)]
+
+
+def _broadcast_in_dim(p: dict, x: np.ndarray) -> np.ndarray:
+    shape, dims = p["shape"], p["broadcast_dimensions"]
+    expanded = [1] * len(shape)
+    for i, d in enumerate(dims):
+        expanded[d] = x.shape[i]
+    return np.broadcast_to(x.reshape(expanded), shape)
+
+
+# Data moves that NumPy performs on arrays of objects directly (no JAX call).
+NUMPY_MOVES: dict[str, Callable[..., Any]] = {
+    "slice": _slice,
+    "squeeze": lambda p, x: np.squeeze(x, axis=tuple(p["dimensions"])),
+    "reshape": lambda p, x: x.reshape(p["new_sizes"]),
+    "broadcast_in_dim": _broadcast_in_dim,
+    "transpose": lambda p, x: x.transpose(p["permutation"]),
+    "rev": lambda p, x: np.flip(x, tuple(p["dimensions"])),
+    "expand_dims": lambda p, x: np.expand_dims(x, tuple(p["dimensions"])),
+    "concatenate": lambda p, *xs: np.concatenate(xs, axis=p["dimension"]),
+    "stack": lambda p, *xs: np.stack(xs, axis=p["axis"]),
+    "split": lambda p, x: np.split(x, np.cumsum(p["sizes"])[:-1], axis=p["axis"]),
+    "copy": lambda p, x: x,
+    "copy_p": lambda p, x: x,
+}
+
+
+def element_map(function: Callable[..., Any], operands: Sequence[Any]) -> np.ndarray:
+    """`function` applied element by element to broadcast operands."""
+    arrays = np.broadcast_arrays(*[np.asarray(x, dtype=object) for x in operands])
+    return object_array(np.frompyfunc(function, len(arrays), 1)(*arrays))
+
+
+def object_array(value: Any) -> np.ndarray:
+    """`value` as an array of objects; a lone element (NumPy returns those for
+    zero-dimensional results) becomes a zero-dimensional array."""
+    if isinstance(value, np.ndarray):
+        return value.astype(object, copy=False)
+    array = np.empty((), dtype=object)
+    array[()] = value
+    return array
+
+
+@functools.cache
+def elementwise_rules(hy: Any) -> dict[str, Callable[..., Any]]:
+    """Element rules: heyoka's function for expressions, NumPy's for numbers."""
+
+    def rule(symbolic_fn: Callable[..., Any], numeric_fn: Callable[..., Any]):
+        def apply(*elements):
+            if any(isinstance(e, hy.expression) for e in elements):
+                return symbolic_fn(*[as_expression(hy, e) for e in elements])
+            return numeric_fn(*[np.float64(e) for e in elements]).item()
+
+        return apply
+
+    def abs_(x):
+        return hy.select(hy.gte(x, 0.0), x, -x)
+
+    def sign(x):
+        return hy.select(hy.gt(x, 0.0), 1.0, hy.select(hy.lt(x, 0.0), -1.0, 0.0))
+
+    rules = {
+        "add": rule(lambda a, b: a + b, np.add),
+        "add_any": rule(lambda a, b: a + b, np.add),
+        "sub": rule(lambda a, b: a - b, np.subtract),
+        "mul": rule(lambda a, b: a * b, np.multiply),
+        "div": rule(lambda a, b: a / b, np.divide),
+        "neg": rule(lambda a: -a, np.negative),
+        "pow": rule(lambda a, b: a**b, np.power),
+        "rsqrt": rule(lambda a: a**-0.5, lambda a: 1 / np.sqrt(a)),
+        "square": rule(lambda a: a * a, np.square),
+        "exp2": rule(lambda a: hy.exp(a * float(np.log(2.0))), np.exp2),
+        "logistic": rule(hy.sigmoid, lambda a: 1 / (1 + np.exp(-a))),
+        "abs": rule(abs_, np.abs),
+        "sign": rule(sign, np.sign),
+        "max": rule(lambda a, b: hy.select(hy.gt(a, b), a, b), np.maximum),
+        "min": rule(lambda a, b: hy.select(hy.lt(a, b), a, b), np.minimum),
+        "and": rule(lambda a, b: hy.logical_and([a, b]), np.logical_and),
+        "or": rule(lambda a, b: hy.logical_or([a, b]), np.logical_or),
+        "not": rule(lambda a: hy.eq(a, 0.0), np.logical_not),
+        "atan2": rule(hy.atan2, np.arctan2),
+    }
+    relations = dict(eq="eq", ne="neq", lt="lt", le="lte", gt="gt", ge="gte")
+    for jax_name, hy_name in relations.items():
+        rules[jax_name] = rule(getattr(hy, hy_name), getattr(np, _NUMPY[jax_name]))
+    for name in ("sqrt", "exp", "log", "log1p", "expm1", "sin", "cos", "tan"):
+        rules[name] = rule(getattr(hy, name), getattr(np, name))
+    for name in ("sinh", "cosh", "tanh"):
+        rules[name] = rule(getattr(hy, name), getattr(np, name))
+    for name in ("asin", "acos", "atan", "asinh", "acosh", "atanh"):
+        rules[name] = rule(getattr(hy, name), getattr(np, "arc" + name[1:]))
+    for name in ("erf", "erfc"):
+        rules[name] = rule(getattr(hy, name), getattr(jax.scipy.special, name))
+    return rules
+
+
+_NUMPY = dict(
+    eq="equal",
+    ne="not_equal",
+    lt="less",
+    le="less_equal",
+    gt="greater",
+    ge="greater_equal",
+)
+
+
+def select_elements(hy: Any, predicate: Any, cases: Sequence[Any]) -> np.ndarray:
+    """`lax.select_n` element by element, the predicate possibly state-dependent."""
+
+    def pick(p, *options):
+        if not isinstance(p, hy.expression):
+            return options[int(p)]
+        result = as_expression(hy, options[0])
+        for k in range(1, len(options)):
+            chosen = p if len(options) == 2 else hy.eq(p, float(k))
+            result = hy.select(chosen, as_expression(hy, options[k]), result)
+        return result
+
+    return element_map(pick, [predicate, *cases])
+
+
+def _select_n(walk: Walk, eqn: Any, operands: list[Any]) -> list[Any]:
+    return [select_elements(walk.hy, operands[0], operands[1:])]
+
+
+def _integer_pow(walk: Walk, eqn: Any, operands: list[Any]) -> list[Any]:
+    y = eqn.params["y"]
+    return [element_map(lambda a: a**y, operands)]
+
+
+def _convert(walk: Walk, eqn: Any, operands: list[Any]) -> list[Any]:
+    """Float to float keeps the expression; a comparison (bool) read as a number is
+    heyoka's 0/1; a state-dependent float made bool is `x != 0`; float to integer
+    has no Taylor series and is refused."""
+    hy, (x,) = walk.hy, operands
+    source, target = eqn.invars[0].aval.dtype, np.dtype(eqn.params["new_dtype"])
+    if target == np.bool_ and source != np.bool_:
+        return [element_map(lambda a: hy.neq(as_expression(hy, a), 0.0), [x])]
+    if np.issubdtype(target, np.integer) and np.issubdtype(source, np.floating):
+        raise UnsupportedPrimitiveError(
+            "convert_element_type", "a state-dependent float converted to an integer"
+        )
+    return [x]
+
+
+def _dot_general(walk: Walk, eqn: Any, operands: list[Any]) -> list[Any]:
+    """Sums of products, terms with a numeric zero factor left out."""
+    (lc, rc), (lb, rb) = eqn.params["dimension_numbers"]
+    lhs, rhs = (np.asarray(x, dtype=object) for x in operands)
+    lf = [d for d in range(lhs.ndim) if d not in lc and d not in lb]
+    rf = [d for d in range(rhs.ndim) if d not in rc and d not in rb]
+    batch = [lhs.shape[d] for d in lb]
+    shape = (*batch, *[lhs.shape[d] for d in lf], *[rhs.shape[d] for d in rf])
+    k = int(np.prod([lhs.shape[d] for d in lc]))
+    a = lhs.transpose([*lb, *lf, *lc]).reshape(int(np.prod(batch)), -1, k)
+    b = rhs.transpose([*rb, *rc, *rf]).reshape(int(np.prod(batch)), k, -1)
+    out = np.empty((a.shape[0], a.shape[1], b.shape[2]), dtype=object)
+    for index in np.ndindex(*out.shape):
+        i, m, n = index
+        out[index] = _sum(
+            walk.hy,
+            [
+                x * y
+                for x, y in zip(a[i, m], b[i, :, n])
+                if not (_is_zero(x) or _is_zero(y))
+            ],
+        )
+    return [out.reshape(shape)]
+
+
+def _is_zero(element: Any) -> bool:
+    return isinstance(element, (bool, int, float, np.number)) and element == 0
+
+
+def _sum(hy: Any, terms: list[Any]) -> Any:
+    if not terms:
+        return 0.0
+    if any(isinstance(t, hy.expression) for t in terms):
+        return hy.sum([as_expression(hy, t) for t in terms])
+    return float(sum(terms))
+
+
+def _reduction(combine: str) -> Callable[[Walk, Any, list[Any]], list[Any]]:
+    """reduce_sum / reduce_max / reduce_min / reduce_prod over `axes`."""
+
+    def rule(walk: Walk, eqn: Any, operands: list[Any]) -> list[Any]:
+        fold = elementwise_rules(walk.hy)[combine]
+        ufunc = np.frompyfunc(fold, 2, 1)
+        x = np.asarray(operands[0], dtype=object)
+        for axis in sorted(eqn.params["axes"], reverse=True):
+            x = (
+                ufunc.reduce(x, axis=axis)
+                if x.shape[axis]
+                else _empty(combine, x, axis)
+            )
+        return [object_array(x)]
+
+    return rule
+
+
+def _empty(combine: str, x: np.ndarray, axis: int) -> np.ndarray:
+    if combine not in ("add", "mul"):
+        raise UnsupportedPrimitiveError(f"reduce_{combine}", "an empty reduction")
+    return np.full(np.delete(x.shape, axis), 0.0 if combine == "add" else 1.0, object)
+
+
+def _cumulative(combine: str) -> Callable[[Walk, Any, list[Any]], list[Any]]:
+    """cumsum / cumprod / cummax / cummin along `axis`, maybe reversed."""
+
+    def rule(walk: Walk, eqn: Any, operands: list[Any]) -> list[Any]:
+        ufunc = np.frompyfunc(elementwise_rules(walk.hy)[combine], 2, 1)
+        axis, reverse = eqn.params["axis"], eqn.params["reverse"]
+        x = np.asarray(operands[0], dtype=object)
+        x = np.flip(x, axis) if reverse else x
+        out = ufunc.accumulate(x, axis=axis, dtype=object)
+        return [np.flip(out, axis) if reverse else out]
+
+    return rule
+
+
+SYMBOLIC_RULES: dict[str, Callable[[Walk, Any, list[Any]], list[Any]]] = {
+    "select_n": _select_n,
+    "integer_pow": _integer_pow,
+    "convert_element_type": _convert,
+    "dot_general": _dot_general,
+    "reduce_sum": _reduction("add"),
+    "reduce_prod": _reduction("mul"),
+    "reduce_max": _reduction("max"),
+    "reduce_min": _reduction("min"),
+    "cumsum": _cumulative("add"),
+    "cumprod": _cumulative("mul"),
+    "cummax": _cumulative("max"),
+    "cummin": _cumulative("min"),
+}
+
+
+def _cond(walk: Walk, eqn: Any, operands: list[Any]) -> list[Any]:
+    """The taken branch for a numeric index; a select over the branches for a
+    state-dependent one, an untranslatable branch replaced by NaN (recorded)."""
+    index, *inputs = operands
+    branches = eqn.params["branches"]
+    if not symbolic(index):
+        taken = int(np.clip(int(index), 0, len(branches) - 1))
+        return walk.enter(branches[taken], inputs)
+    outputs, failures = [], []
+    for branch in branches:
+        try:
+            outputs.append(walk.enter(branch, inputs))
+        except UnsupportedPrimitiveError as error:
+            failures.append(error)
+            outputs.append([_poison(aval) for aval in branch.out_avals])
+    if len(failures) == len(branches):
+        raise failures[0]
+    walk.poisoned.extend(error.primitive for error in failures)
+    return [select_elements(walk.hy, index, cases) for cases in zip(*outputs)]
+
+
+def _poison(aval: Any) -> np.ndarray:
+    """A branch's output where it cannot be translated: NaN for floats (a run that
+    takes the branch stops as non-finite); zeros for flags and integers."""
+    fill = np.nan if np.issubdtype(aval.dtype, np.floating) else 0
+    return np.full(aval.shape, fill, dtype=aval.dtype)
+
+
+def _scan(walk: Walk, eqn: Any, operands: list[Any]) -> list[Any]:
+    """A scan of fixed length, unrolled."""
+    p = eqn.params
+    length, n_consts, n_carry = p["length"], p["num_consts"], p["num_carry"]
+    if length > MAX_UNROLL:
+        raise UnsupportedPrimitiveError("scan", f"length {length} > {MAX_UNROLL}")
+    consts, carry = operands[:n_consts], operands[n_consts : n_consts + n_carry]
+    xs = operands[n_consts + n_carry :]
+    steps = range(length - 1, -1, -1) if p["reverse"] else range(length)
+    ys: list[list[Any]] = []
+    for i in steps:
+        outs = walk.enter(p["jaxpr"], [*consts, *carry, *[x[i] for x in xs]])
+        carry, y = outs[:n_carry], outs[n_carry:]
+        ys.append(y)
+    ys = ys[::-1] if p["reverse"] else ys
+    stacked = [
+        _stack([y[j] for y in ys], aval) for j, aval in enumerate(eqn.outvars[n_carry:])
+    ]
+    return [*carry, *stacked]
+
+
+def _stack(values: list[Any], var: Any) -> np.ndarray:
+    if not values:
+        return np.zeros(var.aval.shape, var.aval.dtype)
+    if any(symbolic(v) for v in values):
+        return np.stack([np.asarray(v, dtype=object) for v in values])
+    return np.stack(values)
+
+
+def _while(walk: Walk, eqn: Any, operands: list[Any]) -> list[Any]:
+    """A while_loop unrolled as long as its condition does not depend on the state."""
+    p = eqn.params
+    n_cond, n_body = p["cond_nconsts"], p["body_nconsts"]
+    cond_consts, body_consts = operands[:n_cond], operands[n_cond : n_cond + n_body]
+    carry = operands[n_cond + n_body :]
+    for _ in range(MAX_UNROLL):
+        (go,) = walk.enter(p["cond_jaxpr"], [*cond_consts, *carry])
+        if symbolic(go):
+            raise UnsupportedPrimitiveError(
+                "while", "a loop whose condition depends on the state"
+            )
+        if not bool(go):
+            return carry
+        carry = walk.enter(p["body_jaxpr"], [*body_consts, *carry])
+    raise UnsupportedPrimitiveError("while", f"more than {MAX_UNROLL} iterations")
+
+
+CONTROL_RULES: dict[str, Callable[[Walk, Any, list[Any]], list[Any]]] = {
+    "cond": _cond,
+    "scan": _scan,
+    "while": _while,
+}
