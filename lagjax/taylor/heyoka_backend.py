@@ -156,7 +156,9 @@ def heyoka_integrate(
         outcome, _, _, steps, *_ = ta.propagate_until(grid[0], max_steps=max_steps)
         status = outcome.name
     rows = np.full((grid.shape[0], y0.shape[0]), np.nan, dtype=fp_type)
-    if status == "time_limit":
+    if grid.size == 1 and status == "time_limit":
+        rows[0] = ta.state
+    elif status == "time_limit":
         outcome, _, _, more, _, states = ta.propagate_grid(
             grid, max_steps=max(max_steps - steps, 1)
         )
@@ -248,11 +250,17 @@ def _run_chunk(
     if grid[0] != t0:
         ta.propagate_until(grid[0], max_steps=max_steps)
         steps += [res[3] for res in ta.propagate_res]
+    rows = np.full((width, grid.shape[0], y0s.shape[1]), np.nan, dtype=y0s.dtype)
+    if grid[0] != t0:
+        outcomes = np.array([res[0].name for res in ta.propagate_res], dtype=object)
+        if grid.size == 1 or set(outcomes) != {"time_limit"}:
+            reached = outcomes == "time_limit"
+            rows[reached, 0] = ta.state.T[reached]
+            return rows, steps, outcomes
     block = np.repeat(grid[:, None], width, axis=1)
     _, states = ta.propagate_grid(block, max_steps=max_steps)
     steps += [res[3] for res in ta.propagate_res]
     outcomes = np.array([res[0].name for res in ta.propagate_res], dtype=object)
-    rows = np.full((width, grid.shape[0], y0s.shape[1]), np.nan, dtype=y0s.dtype)
     rows[:, : states.shape[0]] = np.transpose(states, (2, 0, 1))
     return rows, steps, outcomes
 
@@ -352,14 +360,7 @@ def _integrator(
     batch width and precision (the expressions are the key: a function traced
     anew to the same equations reuses the compilation)."""
     hy = import_heyoka()
-    key = (
-        tuple(rhs for _, rhs in system.equations),
-        system.num_pars,
-        tol,
-        width,
-        np.dtype(fp_type).str,
-        compact_mode,
-    )
+    key = (system.key, tol, width, np.dtype(fp_type).str, compact_mode)
     if key in _CACHES.integrators:
         _CACHES.integrators.move_to_end(key)
         return _CACHES.integrators[key]

@@ -38,6 +38,7 @@ Taylor methods", Experimental Mathematics 14 (2005) 99; the JAX documentation,
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -48,8 +49,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from lagjax._linalg.jaxpr_interpreter import evaluate_jaxpr
+from lagjax.taylor.heyoka_control import CONTROL_RULES
 from lagjax.taylor.heyoka_rules import (
-    CONTROL_RULES,
     DATA_MOVES,
     SYMBOLIC_RULES,
     UnsupportedPrimitiveError,
@@ -84,6 +85,28 @@ class HeyokaSystem:
     equations: tuple[tuple[Any, Any], ...]
     num_pars: int
     poisoned: tuple[str, ...]
+
+    @functools.cached_property
+    def key(self) -> _Equations:
+        """The right-hand sides as a dictionary key, hashed once."""
+        return _Equations(tuple(rhs for _, rhs in self.equations), self.num_pars)
+
+
+class _Equations:
+    """Expressions compared by structure, their hash computed once (hashing a
+    heyoka expression walks its tree)."""
+
+    def __init__(self, rhs: tuple[Any, ...], num_pars: int) -> None:
+        self.rhs, self.num_pars = rhs, num_pars
+        self.hash = hash((rhs, num_pars))
+
+    def __hash__(self) -> int:
+        return self.hash
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, _Equations):
+            return NotImplemented
+        return (self.rhs, self.num_pars) == (other.rhs, other.num_pars)
 
 
 def import_heyoka() -> Any:

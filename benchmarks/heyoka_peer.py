@@ -1,0 +1,265 @@
+r"""heyoka as a peer: its Taylor integrator beside lagjax's Dopri8, and lagjax's
+equations run by heyoka through the backend (`lagjax.taylor.heyoka_backend`).
+
+Three columns on one pinned core: **heyoka** — the equations derived by heyoka
+itself (`heyoka.lagrangian`) and integrated by `taylor_adaptive` /
+`taylor_adaptive_batch`; **lagjax→heyoka** — the equations derived by lagjax
+(`lj.Lagrangian(L).acceleration`), their jaxpr translated into heyoka's expressions
+(`heyoka_integrate`); **lagjax Dopri8** — `lj.simulate` with `diffrax.Dopri8` at
+rtol = atol = 1e-14, jitted. Cases (issue 28), unit masses and rods, g = 9.81:
+
+(a) the double pendulum from θ = (0.5, 0.3), q̇ = 0, to t = 100; heyoka at tol 1e-12
+    and 1e-15; the error is the largest difference of the final state from heyoka
+    in long double at tol 1e-18;
+(b) 1024 double pendulums, θ₁ ∈ linspace(0.1, 1), θ₂ = 0.3, to t = 10, heyoka's
+    batch mode at its SIMD width against `jax.jit(jax.vmap(...))`;
+(c) the n-link pendulum, n = 2, 4, 8, released at rest from 0.5 rad, to t = 10:
+    first call (derivation, translation, compilation) and run.
+
+Runs are medians of at least five warm calls; compilation is timed apart. heyoka
+is optional (`pip install heyoka`). `--quick` shortens every run (CI check).
+
+References: F. Biscani & D. Izzo, "Revisiting high-order Taylor methods for
+astrodynamics and celestial mechanics", MNRAS 504 (2021) 2614; À. Jorba & M. Zou,
+Experimental Mathematics 14 (2005) 99.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import time
+from collections.abc import Callable
+from typing import Any
+
+import diffrax
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import lagjax as lj
+from benchmarks.scaling_size import n_link_pendulum_lagrangian
+from lagjax.taylor.heyoka_backend import heyoka_integrate, heyoka_integrate_batch
+from lagjax.taylor.heyoka_expressions import import_heyoka
+
+DOPRI8_TOL = 1e-14
+REFERENCE_TOL = 1e-18
+FULL = dict(
+    single_t1=100.0,
+    single_tols=(1e-12, 1e-15),
+    batch=1024,
+    batch_t1=10.0,
+    batch_tols=(1e-9, 1e-15),
+    links=(2, 4, 8),
+    chain_t1=10.0,
+    chain_tol=1e-14,
+)
+QUICK = dict(
+    single_t1=5.0,
+    single_tols=(1e-12,),
+    batch=16,
+    batch_t1=1.0,
+    batch_tols=(1e-9,),
+    links=(2,),
+    chain_t1=1.0,
+    chain_tol=1e-9,
+)
+
+
+def median_seconds(call: Callable[[], Any], repeats: int = 5) -> float:
+    call()
+    runs = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        jax.block_until_ready(call())
+        runs.append(time.perf_counter() - start)
+    return statistics.median(runs)
+
+
+def timed(call: Callable[[], Any]) -> tuple[float, Any]:
+    start = time.perf_counter()
+    out = jax.block_until_ready(call())
+    return time.perf_counter() - start, out
+
+
+class Chain:
+    """The n-link pendulum three ways: heyoka's equations, lagjax's vector field,
+    lagjax's Lagrangian."""
+
+    def __init__(self, n: int) -> None:
+        hy = import_heyoka()
+        self.n = n
+        qs = [hy.make_vars(f"q{i}") for i in range(n)]
+        qds = [hy.make_vars(f"qd{i}") for i in range(n)]
+        self.heyoka_equations = hy.lagrangian(
+            n_link_pendulum_lagrangian(hy, qs, qds), qs, qds
+        )
+        self.lagrangian = lj.Lagrangian(
+            lambda q, qd: n_link_pendulum_lagrangian(jnp, q, qd)
+        )
+
+    def vector_field(self, t: Any, y: Any, args: Any) -> Any:
+        q, qd = y[: self.n], y[self.n :]
+        return jnp.concatenate([qd, self.lagrangian.acceleration(q, qd, t, args)])
+
+    def heyoka(self, y0: np.ndarray, tol: float, fp_type: Any = float, width: int = 0):
+        hy = import_heyoka()
+        compact = 2 * self.n > 6
+        if width:
+            state = np.repeat(y0[:, None], width, axis=1)
+            return hy.taylor_adaptive_batch(self.heyoka_equations, state, tol=tol,
+                                            compact_mode=compact)  # fmt: skip
+        return hy.taylor_adaptive(self.heyoka_equations, y0.astype(fp_type), tol=fp_type(tol),
+                                  compact_mode=compact, fp_type=fp_type)  # fmt: skip
+
+    def dopri8(self, t1: float) -> Callable[[Any], Any]:
+        def final(y0):
+            run = lj.simulate(self.lagrangian, (y0[: self.n], y0[self.n :]), t1=t1,
+                              solver=diffrax.Dopri8(), rtol=DOPRI8_TOL, atol=DOPRI8_TOL,
+                              max_steps=10**6)  # fmt: skip
+            return jnp.concatenate([run.q[-1], run.qdot[-1]])
+
+        return final
+
+
+def heyoka_until(ta: Any, y0: np.ndarray, t1: float) -> np.ndarray:
+    fp = ta.state.dtype.type
+    ta.time, ta.state[:] = fp(0.0), y0.astype(fp)
+    ta.propagate_until(fp(t1))
+    return ta.state.copy()
+
+
+def reference(chain: Chain, y0: np.ndarray, t1: float) -> np.ndarray:
+    ta = chain.heyoka(y0, REFERENCE_TOL, fp_type=np.longdouble)
+    return heyoka_until(ta, y0, t1).astype(float)
+
+
+def row(
+    case: str, route: str, tol: float, first_s: float, call: Callable, exact
+) -> dict:
+    """One table row: `call()` returns the final state(s), compared with `exact`."""
+    error = np.max(np.abs(np.asarray(call(), dtype=float) - exact))
+    return dict(case=case, route=route, tol=tol, first_s=first_s,
+                run_s=median_seconds(call), error=float(error))  # fmt: skip
+
+
+def heyoka_rows(case: str, chain: Chain, y0, t1: float, tol: float, exact,
+                derive_s: float = 0.0) -> list[dict]:  # fmt: skip
+    """heyoka's own equations, and lagjax's through the backend, at `tol`."""
+    compile_s, ta = timed(lambda: chain.heyoka(y0, tol))
+
+    def backend():
+        return heyoka_integrate(chain.vector_field, y0, 0.0, t1, tol=tol).ys[-1]
+
+    first_s, _ = timed(backend)
+    return [
+        row(
+            case,
+            "heyoka",
+            tol,
+            derive_s + compile_s,
+            lambda: heyoka_until(ta, y0, t1),
+            exact,
+        ),
+        row(case, "lagjax->heyoka", tol, first_s, backend, exact),
+    ]
+
+
+def dopri8_row(case: str, chain: Chain, y0s, t1: float, exact) -> dict:
+    """lagjax's Dopri8, jitted (and vmapped for a batch of initial states)."""
+    final = chain.dopri8(t1)
+    final = jax.jit(jax.vmap(final) if np.ndim(y0s) == 2 else final)
+    first_s, _ = timed(lambda: final(jnp.asarray(y0s)))
+    return row(case, "lagjax Dopri8", DOPRI8_TOL, first_s, lambda: final(jnp.asarray(y0s)),
+               exact)  # fmt: skip
+
+
+def single_case(config: dict) -> list[dict]:
+    chain, t1 = Chain(2), config["single_t1"]
+    y0 = np.array([0.5, 0.3, 0.0, 0.0])
+    exact = reference(chain, y0, t1)
+    rows = [r for tol in config["single_tols"]
+            for r in heyoka_rows("single", chain, y0, t1, tol, exact)]  # fmt: skip
+    return [*rows, dopri8_row("single", chain, y0, t1, exact)]
+
+
+def batch_rows(
+    case: str, chain: Chain, y0s, t1: float, tol: float, exact
+) -> list[dict]:
+    """heyoka's batch mode at its SIMD width, raw and through the backend."""
+    width = import_heyoka().recommended_simd_size()
+    compile_s, ta = timed(lambda: chain.heyoka(y0s[0], tol, width=width))
+
+    def raw():
+        out = np.empty_like(y0s)
+        for start in range(0, y0s.shape[0], width):
+            ta.set_time(np.zeros(width))
+            ta.state[:] = y0s[start : start + width].T
+            ta.propagate_until(t1)
+            out[start : start + width] = ta.state.T
+        return out
+
+    def backend():
+        return heyoka_integrate_batch(chain.vector_field, y0s, 0.0, t1, tol=tol).ys[
+            :, -1
+        ]
+
+    first_s, _ = timed(backend)
+    return [row(case, "heyoka", tol, compile_s, raw, exact),
+            row(case, "lagjax->heyoka", tol, first_s, backend, exact)]  # fmt: skip
+
+
+def batch_case(config: dict) -> list[dict]:
+    chain, t1, members = Chain(2), config["batch_t1"], config["batch"]
+    y0s = np.stack([[a, 0.3, 0.0, 0.0] for a in np.linspace(0.1, 1.0, members)])
+    exact = np.stack([reference(chain, y0, t1) for y0 in y0s])
+    case = f"batch x{members}"
+    rows = [r for tol in config["batch_tols"]
+            for r in batch_rows(case, chain, y0s, t1, tol, exact)]  # fmt: skip
+    return [*rows, dopri8_row(case, chain, y0s, t1, exact)]
+
+
+def chain_case(config: dict) -> list[dict]:
+    rows, t1 = [], config["chain_t1"]
+    for n in config["links"]:
+        start = time.perf_counter()
+        chain = Chain(n)
+        derive_s = time.perf_counter() - start
+        y0 = np.concatenate([np.full(n, 0.5), np.zeros(n)])
+        exact = reference(chain, y0, t1)
+        case = f"{n}-link"
+        rows += heyoka_rows(case, chain, y0, t1, config["chain_tol"], exact, derive_s)
+        rows.append(dopri8_row(case, chain, y0, t1, exact))
+    return rows
+
+
+def print_table(rows: list[dict]) -> None:
+    print(
+        f"{'case':<12} {'route':<16} {'tol':>7} {'first call':>11} {'run':>11} {'error':>9}"
+    )
+    for r in rows:
+        print(f"{r['case']:<12} {r['route']:<16} {r['tol']:>7.0e} {r['first_s']:>10.3f}s "
+              f"{r['run_s'] * 1e3:>9.2f}ms {r['error']:>9.1e}")  # fmt: skip
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="short runs (CI check)")
+    parser.add_argument("--json", help="write the rows to this path")
+    options = parser.parse_args()
+    jax.config.update("jax_enable_x64", True)
+    os.sched_setaffinity(0, {0})  # one core (Linux)
+    config = QUICK if options.quick else FULL
+    rows = single_case(config) + batch_case(config) + chain_case(config)
+    print_table(rows)
+    if options.json:
+        with open(options.json, "w") as file:
+            json.dump(
+                dict(quick=options.quick, config=config, rows=rows), file, indent=1
+            )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,124 @@
+"""The heyoka backend: the jaxpr translation, runs against lagjax's own, the batch
+mode, the compilation cache, and what it refuses (by name)."""
+
+import diffrax
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import lagjax as lj
+
+hy = pytest.importorskip("heyoka")
+
+from lagjax.taylor.heyoka_backend import (  # noqa: E402
+    UnsupportedPrimitiveError,
+    heyoka_cache_info,
+    heyoka_integrate,
+    heyoka_integrate_batch,
+    heyoka_tolerance,
+    jaxpr_to_heyoka,
+)
+
+
+def double_pendulum(q, qd, t, args):
+    """m = l = 1; `args["g"]` the gravity."""
+    (a, b), (u, v) = (q[0], q[1]), (qd[0], qd[1])
+    kinetic = u**2 + 0.5 * v**2 + u * v * jnp.cos(a - b)
+    return kinetic + args["g"] * (2 * jnp.cos(a) + jnp.cos(b))
+
+
+LAGRANGIAN = lj.Lagrangian(double_pendulum)
+ARGS = {"g": jnp.asarray(9.81)}
+Y0 = np.array([0.5, 0.3, 0.0, 0.0])
+
+
+def vector_field(t, y, args):
+    q, qd = y[:2], y[2:]
+    return jnp.concatenate([qd, LAGRANGIAN.acceleration(q, qd, t, args)])
+
+
+def test_translation_matches_the_jax_vector_field():
+    system = jaxpr_to_heyoka(vector_field, 4, ARGS)
+    variables = [y for y, _ in system.equations]
+    rhs = hy.cfunc([f for _, f in system.equations], variables)
+    states = np.random.default_rng(0).normal(size=(20, 4))
+    for g in (9.81, 1.5):
+        jax_values = jax.vmap(vector_field, (None, 0, None))(0.0, states, {"g": g})
+        heyoka_values = rhs(np.ascontiguousarray(states.T), pars=np.full((1, 20), g)).T
+        np.testing.assert_allclose(heyoka_values, jax_values, rtol=1e-13, atol=1e-13)
+    assert system.num_pars == 1 and system.poisoned == ()
+
+
+def test_one_trajectory_agrees_with_dopri8():
+    ts = np.linspace(0.0, 5.0, 6)
+    run = heyoka_integrate(vector_field, Y0, 0.0, 5.0, ts=ts, args=ARGS, tol=1e-15)
+    reference = lj.simulate(
+        LAGRANGIAN, (jnp.asarray(Y0[:2]), jnp.asarray(Y0[2:])), t1=5.0, ts=ts,
+        args=ARGS, solver=diffrax.Dopri8(), rtol=1e-13, atol=1e-13, max_steps=10**5,
+    )  # fmt: skip
+    assert run.status == "time_limit" and run.num_steps > 0
+    np.testing.assert_allclose(run.ys[:, :2], reference.q, atol=1e-10)
+    np.testing.assert_allclose(run.ys[:, 2:], reference.qdot, atol=1e-10)
+
+
+def test_batch_equals_single_runs():
+    y0s = np.stack([[a, 0.3, 0.0, 0.0] for a in np.linspace(0.1, 1.0, 6)])
+    gs = np.linspace(9.0, 10.0, 6)
+    batch = heyoka_integrate_batch(
+        vector_field, y0s, 0.0, 1.0, args_batch={"g": gs}, tol=1e-15
+    )
+    for i in range(6):
+        single = heyoka_integrate(vector_field, y0s[i], 0.0, 1.0, args={"g": gs[i]},
+                                  tol=1e-15)  # fmt: skip
+        # SIMD and scalar code round the elementary functions differently.
+        np.testing.assert_allclose(batch.ys[i], single.ys, rtol=0, atol=1e-14)
+        assert abs(batch.num_steps[i] - single.num_steps) <= 1
+    assert list(batch.status) == ["time_limit"] * 6
+
+
+def test_new_args_do_not_recompile():
+    heyoka_integrate(vector_field, Y0, 0.0, 1.0, args=ARGS, tol=1e-14)
+    before = heyoka_cache_info()
+    runs = [heyoka_integrate(vector_field, Y0, 0.0, 1.0, args={"g": jnp.asarray(g)},
+                             tol=1e-14) for g in (1.0, 4.0)]  # fmt: skip
+    assert heyoka_cache_info() == before
+    assert not np.allclose(runs[0].ys, runs[1].ys)
+
+
+def test_unsupported_primitive_is_refused_by_name():
+    def rounded(t, y, args):
+        return jnp.round(y)
+
+    with pytest.raises(UnsupportedPrimitiveError, match="`round`"):
+        jaxpr_to_heyoka(rounded, 2)
+
+
+def test_state_dependent_loop_is_refused_by_name():
+    def newton(t, y, args):
+        return jax.lax.while_loop(lambda x: x[0] > 1.0, lambda x: x / 2, y)
+
+    with pytest.raises(UnsupportedPrimitiveError, match="`while`"):
+        jaxpr_to_heyoka(newton, 2)
+
+
+def test_traced_inputs_are_refused_by_name():
+    def final(y0):
+        return heyoka_integrate(vector_field, y0, 0.0, 1.0, args=ARGS).ys
+
+    with pytest.raises(TypeError, match=r"traced `y0`.*lj\.Taylor"):
+        jax.jit(final)(jnp.asarray(Y0))
+    with pytest.raises(TypeError, match="traced `args`"):
+        jax.grad(lambda g: heyoka_integrate(vector_field, Y0, 0.0, 1.0,
+                                            args={"g": g}).ys.sum())(9.81)  # fmt: skip
+
+
+def test_bad_tolerances_and_step_limit():
+    for bad in (0.0, -1e-9, float("nan")):
+        with pytest.raises(ValueError, match="rtol"):
+            heyoka_tolerance(bad, 1e-9)
+    with pytest.raises(RuntimeError, match="max_steps = 5"):
+        heyoka_integrate(vector_field, Y0, 0.0, 100.0, args=ARGS, max_steps=5)
+    partial = heyoka_integrate(vector_field, Y0, 0.0, 100.0, ts=[50.0, 100.0],
+                               args=ARGS, max_steps=5, throw=False)  # fmt: skip
+    assert partial.status == "step_limit" and np.isnan(partial.ys).all()
