@@ -7,37 +7,45 @@ shooting code call nothing else:
 | question | method |
 |---|---|
 | which system and parameters? (a scene is its system with itself as `args`) | `resolve(args)` |
-| which solver when the caller names none? | `default_solver(dt)` |
-| which solver does a request become? (a constrained L wraps it in a projection) | `adapt_solver(solver)` |
+| which method when the caller names none? | `default_method(dt)` |
+| must every solver keep constraints? (a constrained L: projected or RATTLE) | `keeps_constraints()` |
 | which diffrax terms and start state for that solver, and whose state is it? | `integration(solver, y0, t0, args)` |
 | q̇, p and the energy at an integrated state `(q, second)` | `state_velocity`, `state_momentum`, `state_energy` |
 | is the second state component q̇ or p? | `second_is_momentum` |
 | L along a path (the action) | `path_lagrangian()` |
+| the rates (q̇, q̈) or (q̇, ṗ) in the caller's convention (phase-space tools) | `state_rate` |
+| is y0 a sound pair for this system? is the start admissible? | `checked_state_pair`, `check_start` |
+| which system-specific terms (Lie–Poisson, RATTLE) may its solvers ask for? | `accepted_terms`, `refuse_solver` |
+| the span and step of a run that names none | `default_span()` |
+| can the phase-space tools take it? | `phase_space_obstacle()` |
 | is the energy conserved when autonomous? (divergence checks) | `conserves_energy_if_autonomous()` |
 
 The integrated state is the user's `y0` convention or the canonical one: a
 `Lagrangian` integrated by a symplectic method runs on (q, p) of its Legendre
 transform, so `integration` returns the system the state belongs to, and the
 trajectory asks *that* system for q̇, p and the energy. A new kind of system is one
-new class implementing these methods.
+new class implementing these methods. The solvers a system dispatches on are the
+abstract kinds of `lagjax._core.solver_kinds`; which concrete solver a default or a
+constraint projection becomes is decided above both, in
+`lagjax._integrate.solver_choice`.
 """
 
 from __future__ import annotations
 
 import abc
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import diffrax
 import equinox as eqx
+import jax
+import jax.numpy as jnp
 
-if TYPE_CHECKING:
-    from lagjax.mechanics.lagrangian import Lagrangian
+from lagjax._core.solver_kinds import DefaultMethod
+from lagjax._core.solver_kinds import is_partitioned as is_partitioned
+from lagjax._core.system_protocols import LagrangianLike
+from lagjax._core.terms import RattleTerm, RigidBodyTerm
 
-
-def is_partitioned(solver: diffrax.AbstractSolver) -> bool:
-    """True for solvers that step (q, p) with two terms (splitting methods)."""
-    structure = solver.term_structure
-    return isinstance(structure, tuple) and len(structure) == 2
+DEFAULT_T1 = 10.0  # the end time of a run that names none, for a plain system
 
 
 class AbstractSystem(eqx.Module):
@@ -48,12 +56,14 @@ class AbstractSystem(eqx.Module):
         return self, args
 
     @abc.abstractmethod
-    def default_solver(self, dt: Any) -> diffrax.AbstractSolver:
-        """The solver used when the caller names none (fixed step when `dt` is set)."""
+    def default_method(self, dt: Any) -> DefaultMethod:
+        """The method used when the caller names no solver (fixed step when `dt` is
+        set); `lagjax._integrate.solver_choice` makes it a solver."""
 
-    def adapt_solver(self, solver: diffrax.AbstractSolver) -> diffrax.AbstractSolver:
-        """The solver that actually runs for a requested one (default: itself)."""
-        return solver
+    def keeps_constraints(self) -> bool:
+        """Whether every solver must keep constraints: plain solvers are then run
+        with a projection onto them, and structure-preserving ones refused."""
+        return False
 
     @abc.abstractmethod
     def integration(
@@ -85,9 +95,80 @@ class AbstractSystem(eqx.Module):
         no generalized forces, dissipation or constraints (`lagjax._integrate.checks.run_verdict`)."""
         return True
 
-    def path_lagrangian(self) -> Lagrangian:
+    def path_lagrangian(self) -> LagrangianLike:
         """The Lagrangian whose ∫L dt is this system's action along a path."""
         raise TypeError(
             f"{type(self).__name__} has no action functional: it needs a Lagrangian, "
             "a Hamiltonian or a scene"
         )
+
+    @abc.abstractmethod
+    def state_rate(self, q: Any, second: Any, t: Any, args: Any) -> tuple[Any, Any]:
+        """The time derivative of (q, second) in the caller's convention: (q̇, q̈)
+        for a Lagrangian, Hamilton's (q̇, ṗ) for a Hamiltonian."""
+
+    def checked_state_pair(self, first: Any, second: Any) -> tuple[Any, Any]:
+        """y0's components checked against each other: q0 and its partner (q̇0 or
+        p0) have one entry per coordinate. Raises a clear error otherwise."""
+        partner = "p0" if self.second_is_momentum else "qdot0"
+        check_partners(first, second, partner)
+        return first, second
+
+    def check_start(self, y0: Any, t0: Any, args: Any, dtype: Any) -> None:
+        """Refuse, on concrete values in the run's `dtype`, a start the system
+        cannot take (a constrained Lagrangian: off its constraints)."""
+        del y0, t0, args, dtype
+
+    def accepted_terms(self) -> tuple[type, ...]:
+        """The system-specific terms (`RigidBodyTerm`, `RattleTerm`) whose solvers
+        can integrate this system."""
+        return ()
+
+    def refuse_solver(self, solver: diffrax.AbstractSolver) -> None:
+        """Refuse by name a solver written for another kind of system."""
+        structure = solver.term_structure
+        if not isinstance(structure, type) or issubclass(
+            structure, self.accepted_terms()
+        ):
+            return
+        name, kind = type(solver).__name__, type(self).__name__
+        if issubclass(structure, RigidBodyTerm):
+            raise TypeError(
+                f"{name} is a Lie–Poisson solver for a lagjax.RigidBody (state: unit "
+                f"quaternion and body angular momentum); {kind} is not one. Use a "
+                "solver for generalized coordinates (GaussLegendre, Tsit5, a splitting "
+                "method for separable H); a rigid scene gives its body as "
+                "scene.rigid_body()"
+            )
+        if issubclass(structure, RattleTerm):
+            raise TypeError(
+                f"{name} integrates a constrained Lagrangian, "
+                f"lagjax.Lagrangian(L, constraints=g); {kind} has no constraints. Use "
+                "StormerVerlet (separable H), GaussLegendre or Tsit5"
+            )
+
+    def default_span(self) -> tuple[float, float | None]:
+        """`(t1, dt)` of a run that names neither (dt None: adaptive)."""
+        return DEFAULT_T1, None
+
+    def phase_space_obstacle(self) -> str | None:
+        """Why the phase-space tools (Lyapunov spectra, sections, indicators) cannot
+        take this system, or None when they can."""
+        return None
+
+
+def check_partners(q: Any, second: Any, partner: str) -> None:
+    """q0 and its partner must have the same pytree structure and leaf shapes."""
+    q_leaves, q_tree = jax.tree_util.tree_flatten(q)
+    s_leaves, s_tree = jax.tree_util.tree_flatten(second)
+    if q_tree != s_tree:
+        raise ValueError(
+            f"q0 and {partner} must have the same structure, got {q_tree} and "
+            f"{s_tree}: give {partner} one entry per coordinate of q0"
+        )
+    for a, b in zip(q_leaves, s_leaves):
+        if jnp.shape(a) != jnp.shape(b):
+            raise ValueError(
+                f"q0 and {partner} must have the same shapes, got {jnp.shape(a)} and "
+                f"{jnp.shape(b)}: give {partner} one entry per coordinate of q0"
+            )

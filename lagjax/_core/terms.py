@@ -28,9 +28,12 @@ import jax
 import jax.numpy as jnp
 
 from lagjax._core.precision import match_dtypes
-from lagjax.mechanics.hamiltonian import AbstractHamiltonian, SeparableHamiltonian
-from lagjax.mechanics.lagrangian import Lagrangian
-from lagjax.rigid.body import RigidBody
+from lagjax._core.system_protocols import (
+    HamiltonianLike,
+    LagrangianLike,
+    RigidBodyLike,
+    SeparableLike,
+)
 
 
 class AbstractSystemTerm(diffrax.AbstractTerm):
@@ -55,7 +58,7 @@ class LagrangianTerm(AbstractSystemTerm):
     solvers (`VariationalMidpoint`) discretize `lagrangian` directly.
     """
 
-    lagrangian: Lagrangian
+    lagrangian: LagrangianLike
 
     def vf(self, t, y, args):
         q, p = y
@@ -69,7 +72,7 @@ class ConstrainedLagrangianTerm(AbstractSystemTerm):
     integrates it; `ConstraintProjection` reads the constraints from it.
     """
 
-    lagrangian: Lagrangian
+    lagrangian: LagrangianLike
 
     def vf(self, t, y, args):
         q, qdot = y
@@ -84,7 +87,7 @@ class RattleTerm(AbstractSystemTerm):
     `Rattle` reads L and g from it.
     """
 
-    lagrangian: Lagrangian
+    lagrangian: LagrangianLike
 
     def vf(self, t, y, args):
         q, p = y
@@ -102,7 +105,7 @@ class RigidBodyTerm(AbstractSystemTerm):
     compose exact sub-flows instead.
     """
 
-    body: RigidBody
+    body: RigidBodyLike
 
     def vf(self, t, y, args):
         quaternion, body_momentum = y
@@ -140,7 +143,7 @@ def physical_step(
 class LagrangianVectorField(eqx.Module):
     """(q̇, q̈) on the state (q, q̇), q̈ from the Euler–Lagrange equations."""
 
-    system: Lagrangian
+    system: LagrangianLike
 
     def __call__(self, t: Any, y: tuple[Any, Any], args: Any) -> tuple[Any, Any]:
         q, qdot = y
@@ -153,7 +156,7 @@ class LagrangianVectorField(eqx.Module):
 class HamiltonVectorField(eqx.Module):
     """(q̇, ṗ) = (∂H/∂p, −∂H/∂q) on the state (q, p)."""
 
-    system: AbstractHamiltonian
+    system: HamiltonianLike
 
     def __call__(self, t: Any, y: tuple[Any, Any], args: Any) -> tuple[Any, Any]:
         return match_dtypes(self.system.vector_field(y[0], y[1], t, args), y)
@@ -162,7 +165,7 @@ class HamiltonVectorField(eqx.Module):
 class SeparableDrift(eqx.Module):
     """dq/dt = ∂T/∂p as a function of p (the first term of a splitting method)."""
 
-    system: SeparableHamiltonian
+    system: SeparableLike
 
     def __call__(self, t: Any, p: Any, args: Any) -> Any:
         return match_dtypes(self.system.velocity(None, p, t, args), p)
@@ -171,7 +174,7 @@ class SeparableDrift(eqx.Module):
 class SeparableKick(eqx.Module):
     """dp/dt = −∂V/∂q as a function of q (the second term of a splitting method)."""
 
-    system: SeparableHamiltonian
+    system: SeparableLike
 
     def __call__(self, t: Any, q: Any, args: Any) -> Any:
         return match_dtypes(self.system.potential_force(q, t, args), q)

@@ -48,7 +48,6 @@ from jax.core import Tracer
 from lagjax._core.precision import cast_floats, working_dtype
 from lagjax._core.static_values import Constant
 from lagjax._core.system import AbstractSystem
-from lagjax._integrate.checks.initial_state import check_constrained_start
 from lagjax._integrate.checks.inputs import check_simulate_inputs
 from lagjax._integrate.checks.run_verdict import (
     NON_FINITE_MESSAGE as _NON_FINITE_MESSAGE,
@@ -63,6 +62,7 @@ from lagjax._integrate.fixed_step_loop import (
 )
 from lagjax._integrate.flat_state import flattened
 from lagjax._integrate.scan_saving import ScanSaving, integrate_saving, scan_saving
+from lagjax._integrate.solver_choice import chosen_solver
 from lagjax._integrate.step_control import (
     as_python_number,
     check_span,
@@ -114,7 +114,7 @@ def simulate(
       for a scene run by its default (or another fixed-step) solver, which then
       steps by the scene's `default_dt`.
     - `solver`: any diffrax solver or lagjax solver; None picks one by structure
-      (the system's `default_solver`) and records it in `stats["solver"]`.
+      (`lagjax._integrate.solver_choice`) and records it in `stats["solver"]`.
     - `ts`: times to save at; default only the final state. `saveat` overrides.
     - `max_steps`: default: the exact count for fixed steps, 10⁵ adaptive.
     - `progress`: show diffrax's text progress meter.
@@ -158,10 +158,8 @@ def simulate(
     system, args = system.resolve(args)
     # The run works in y0's precision; float inputs follow it (lagjax._core.precision).
     dtype = working_dtype(y0)
-    if solver is None:
-        solver = system.default_solver(dt)
-    solver = system.adapt_solver(solver)
-    check_constrained_start(system, y0, t0, args, dtype)
+    solver = chosen_solver(system, solver, dt)
+    system.check_start(y0, t0, args, dtype)
     if dt is not None or not isinstance(
         stepsize_controller, (diffrax.AbstractAdaptiveStepSizeController, type(None))
     ):

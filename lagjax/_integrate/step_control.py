@@ -20,8 +20,6 @@ import jax
 import numpy as np
 import optimistix as optx
 
-from lagjax.scenes.base import AbstractScene
-
 
 def with_implicit_tolerances(
     solver: diffrax.AbstractSolver, rtol: float, atol: float
@@ -93,18 +91,19 @@ def defaults(system, t0, t1, dt, solver, controller):
     t1 = 10 for a plain system. A scene supplies its own span, and its own step
     unless the caller asked for adaptive stepping (an adaptive solver or a step-size
     controller): `simulate(scene, scene.initial_state())` is then the scene's
-    default run — its `default_solver(default_dt)` at its `default_dt` — as the
+    default run — its default solver (`solver_choice.default_solver`) at its `default_dt` — as the
     command line does it.
     """
-    if not isinstance(system, AbstractScene):
-        return (10.0 if t1 is None else t1), dt
+    default_t1, default_dt = system.default_span()
     if t1 is None:
-        t1 = type(system).default_t1
+        t1 = default_t1
+    if default_dt is None:
+        return t1, dt
     adaptive = controller is not None or isinstance(
         solver, diffrax.AbstractAdaptiveSolver
     )
     if dt is None and not adaptive:
-        dt = type(system).default_dt
+        dt = default_dt
         ends = [as_python_number(x) for x in (t0, t1)]
         if all(isinstance(x, (int, float)) for x in ends) and ends[1] < ends[0]:
             dt = -dt  # a backward run steps backward

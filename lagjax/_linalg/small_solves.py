@@ -32,6 +32,7 @@ import jax
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 import numpy as np
+from jax.core import Tracer
 
 from lagjax._core.batch_branch import any_in_batch
 from lagjax._linalg.loop_factorizations import (
@@ -388,3 +389,13 @@ def singular_message_for(what: str) -> str:
 def raise_if_singular(x, singular: jax.Array, what: str):
     """Attach a run-time error to `x` when `singular` is true (works inside jit)."""
     return eqx.error_if(x, singular, singular_message_for(what))
+
+
+def singular_check(check: bool | str | None, *trees: Any) -> bool | str:
+    """The singular-matrix test to run: `check` itself when given, else an error on
+    concrete values and NaN poisoning when any leaf is traced (a branch per
+    evaluation would split a fused integration step)."""
+    if check is not None:
+        return check
+    traced = any(isinstance(leaf, Tracer) for leaf in jax.tree_util.tree_leaves(trees))
+    return "nan" if traced else True

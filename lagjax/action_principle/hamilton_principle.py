@@ -54,8 +54,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from lagjax._core.system import AbstractSystem
+from lagjax._core.system_protocols import LagrangianLike
 from lagjax.mechanics.hamiltonian import AbstractHamiltonian
-from lagjax.mechanics.lagrangian import Lagrangian
 from lagjax.mechanics.legendre import tree_dot
 from lagjax.trajectory import Trajectory
 
@@ -92,7 +92,7 @@ def _gauss_legendre(
 
 
 def _path_action(
-    lagrangian: Lagrangian, path: Callable, t0: Any, t1: Any, args: Any, nodes: int
+    lagrangian: LagrangianLike, path: Callable, t0: Any, t1: Any, args: Any, nodes: int
 ) -> jax.Array:
     """∫ L(q, q̇, t) dt over one panel, q̇ = dq/dt by forward-mode autodiff."""
 

@@ -34,6 +34,7 @@ import numpy as np
 from lagjax import scenes as scene_catalog
 from lagjax._core.cpu_loops import enable_fast_cpu_loops
 from lagjax._integrate.checks.inputs import check_times
+from lagjax._integrate.solver_choice import default_solver
 from lagjax.cli.run import Outcome, UsageError, first_line, run_scene
 from lagjax.solvers.implicit import (
     AbstractGaussLegendre,
@@ -302,6 +303,7 @@ def _command_run(args) -> int:
         _save(args.save, first)
         print(f"data      {args.save}")
     if args.plot:
+        # matplotlib is the optional `plot` extra: imported only when a plot is asked
         from lagjax.cli.plot import plot_run
 
         plot_run(args.plot, args.scene, scene, first)
@@ -407,7 +409,7 @@ def _reason(error: Exception, scene=None, solver=None, dt=None) -> str:
     for a failed implicit stage solve, what to change (`stage_failure_message`)."""
     text = str(error)
     if scene is not None and ("nonlinear solver" in text or "Nonfinite" in text):
-        chosen = solver if solver is not None else scene.default_solver(dt)
+        chosen = solver if solver is not None else default_solver(scene, dt)
         if isinstance(chosen, AbstractGaussLegendre):
             return stage_failure_message(chosen)
     lines = [line.strip() for line in str(error).splitlines() if line.strip()]

@@ -55,7 +55,7 @@ Mech. Eng. 1, 1 (1972).
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import equinox as eqx
 import jax
@@ -63,12 +63,10 @@ import jax.numpy as jnp
 from jax.core import Tracer
 from jax.flatten_util import ravel_pytree
 
+from lagjax._core.system_protocols import LagrangianLike
 from lagjax._linalg.small_solves import solve_dense_in_step
 from lagjax.mechanics.functions import as_system_function
 from lagjax.mechanics.signature import call_with_arity, positional_arity
-
-if TYPE_CHECKING:
-    from lagjax.mechanics.lagrangian import Lagrangian
 
 _RANK_MESSAGE = (
     "The constraint Jacobian ∂c/∂q̇ is rank-deficient at this state (or the mass "
@@ -229,7 +227,7 @@ def check_constraint_count(constraints: Constraints, q: Any, t: Any, args: Any):
 # Compiled so that eager calls do not dispatch op by op; inlined under an outer jit.
 @eqx.filter_jit
 def constrained_motion(
-    lagrangian: Lagrangian,
+    lagrangian: LagrangianLike,
     q: Any,
     qdot: Any,
     t: Any,

@@ -16,15 +16,28 @@ forces; velocity-dependent potentials), Goldstein, *Classical Mechanics* §1.4�
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
+import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jax.core import Tracer
 from jax.flatten_util import ravel_pytree
 
-from lagjax._core.system import AbstractSystem, is_partitioned
+from lagjax._core.precision import cast_floats
+from lagjax._core.solver_kinds import (
+    AbstractSymplecticRungeKutta,
+    DefaultMethod,
+    is_partitioned,
+)
+from lagjax._core.system import AbstractSystem
+from lagjax._core.terms import (
+    ConstrainedLagrangianTerm,
+    LagrangianTerm,
+    LagrangianVectorField,
+    RattleTerm,
+)
+from lagjax._linalg.small_solves import singular_check as singular_check
 from lagjax.mechanics.constraints import (
     Constraints,
     constrained_motion,
@@ -33,6 +46,7 @@ from lagjax.mechanics.constraints import (
 from lagjax.mechanics.euler_lagrange import euler_lagrange_acceleration
 from lagjax.mechanics.functions import as_system_function
 from lagjax.mechanics.legendre import tree_dot
+from lagjax.mechanics.legendre_hamiltonian import LegendreHamiltonian
 from lagjax.mechanics.network_formulation import (
     holds_network,
     network_euler_lagrange_acceleration,
@@ -47,19 +61,6 @@ from lagjax.mechanics.signature import (
     check_scalar,
     positional_arity,
 )
-
-if TYPE_CHECKING:
-    from lagjax.mechanics.hamiltonian import LegendreHamiltonian
-
-
-def singular_check(check: bool | str | None, *trees: Any) -> bool | str:
-    """The singular-matrix test to run: `check` itself when given, else an error on
-    concrete values and NaN poisoning when any leaf is traced (a branch per
-    evaluation would split a fused integration step)."""
-    if check is not None:
-        return check
-    traced = any(isinstance(leaf, Tracer) for leaf in jax.tree_util.tree_leaves(trees))
-    return "nan" if traced else True
 
 
 class Lagrangian(AbstractSystem):
@@ -259,68 +260,57 @@ class Lagrangian(AbstractSystem):
 
     def to_hamiltonian(self) -> LegendreHamiltonian:
         """The Legendre-transformed Hamiltonian H(q, p, t) = p·q̇ − L."""
-        from lagjax.mechanics.hamiltonian import LegendreHamiltonian
-
         return LegendreHamiltonian(self)
 
     # -- AbstractSystem: how the loop integrates a Lagrangian ---------------------
-    # Imports are local: the solvers and terms are built on this module.
 
     @property
     def second_is_momentum(self) -> bool:
         return False
 
-    def default_solver(self, dt: Any) -> Any:
-        """`GaussLegendre(stages=2)` with `dt` (implicit, symplectic, order 4), else
-        adaptive `Tsit5`; with constraints, `Tsit5` projected onto them."""
-        import diffrax
+    def default_method(self, dt: Any) -> DefaultMethod:
+        """Gauss–Legendre (2 stages: implicit, symplectic, order 4) with `dt`, else
+        adaptive `Tsit5`; with constraints, `Tsit5` (projected onto them)."""
+        if self.constraints is not None or dt is None:
+            return DefaultMethod.ADAPTIVE
+        return DefaultMethod.SYMPLECTIC_RUNGE_KUTTA
 
-        from lagjax.solvers.implicit import GaussLegendre
-        from lagjax.solvers.projection import ConstraintProjection
+    def keeps_constraints(self) -> bool:
+        return self.constraints is not None
 
-        if self.constraints is not None:
-            return ConstraintProjection(diffrax.Tsit5())
-        return diffrax.Tsit5() if dt is None else GaussLegendre(stages=2)
+    def accepted_terms(self) -> tuple[type, ...]:
+        return () if self.constraints is None else (RattleTerm,)
 
-    def adapt_solver(self, solver: Any) -> Any:
-        """With constraints: plain diffrax solvers get the projection; solvers that
-        would ignore the constraints are refused."""
+    def check_start(self, y0: Any, t0: Any, args: Any, dtype: Any) -> None:
+        """A constrained Lagrangian's start must lie on its constraints.
+
+        Checked before the run, on concrete values in the run's `dtype`: the
+        compiled run sees traced values and could only attach the error at run
+        time, without the residuals in the message.
+        """
         if self.constraints is None:
-            return solver
-        from lagjax._core.terms import LagrangianTerm
-        from lagjax.solvers.implicit import AbstractGaussLegendre
-        from lagjax.solvers.projection import ConstraintProjection
-        from lagjax.solvers.rattle import Rattle
-
-        if isinstance(solver, (ConstraintProjection, Rattle)):
-            return solver
-        structure_preserving = (
-            is_partitioned(solver)
-            or isinstance(solver, AbstractGaussLegendre)
-            or solver.term_structure is LagrangianTerm
+            return
+        q0, qdot0 = cast_floats(tuple(y0), dtype)
+        constraints = cast_floats(self.constraints, dtype)
+        refuse_start_off_constraints(
+            constraints, q0, qdot0, t0, cast_floats(args, dtype)
         )
-        if structure_preserving or not isinstance(solver.term_structure, type):
-            raise ValueError(
-                f"{type(solver).__name__} does not enforce constraints. Integrate a "
-                "constrained Lagrangian with an (explicit or implicit) diffrax solver, "
-                "which simulate projects onto the constraints after each step, or with "
-                "Rattle (holonomic constraints, constant mass matrix)."
-            )
-        return ConstraintProjection(solver)
+
+    def state_rate(self, q: Any, second: Any, t: Any, args: Any) -> tuple[Any, Any]:
+        return second, self.acceleration(q, second, t, args)
+
+    def phase_space_obstacle(self) -> str | None:
+        if self.constraints is None:
+            return None
+        return (
+            "A constrained Lagrangian moves on a submanifold, and tangent vectors off "
+            "it would add spurious exponents: write L in independent coordinates."
+        )
 
     def integration(self, solver: Any, y0: Any, t0: Any, args: Any) -> Any:
         """(q, q̇) with the Euler–Lagrange vector field for general solvers; (q, p)
         of the Legendre transform for symplectic ones (and L itself for variational
         ones, the constraints for RATTLE)."""
-        import diffrax
-
-        from lagjax._core.terms import (
-            ConstrainedLagrangianTerm,
-            LagrangianTerm,
-            LagrangianVectorField,
-            RattleTerm,
-        )
-        from lagjax.solvers.implicit import AbstractGaussLegendre
 
         def canonical_start():
             q0, qdot0 = y0
@@ -339,7 +329,7 @@ class Lagrangian(AbstractSystem):
                     "an adaptive solver."
                 )
             return LagrangianTerm(self), canonical_start(), self.to_hamiltonian()
-        if isinstance(solver, AbstractGaussLegendre):
+        if isinstance(solver, AbstractSymplecticRungeKutta):
             hamiltonian = self.to_hamiltonian()
             terms, _, _ = hamiltonian.integration(solver, None, t0, args)
             return terms, canonical_start(), hamiltonian

@@ -62,11 +62,18 @@ import jax
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
+from lagjax._core.system import AbstractSystem
 from lagjax.mechanics import stability
 from lagjax.mechanics.constrained_modes import null_space
 from lagjax.mechanics.constraints import least_correction
 from lagjax.mechanics.hamiltonian import AbstractHamiltonian
 from lagjax.mechanics.lagrangian import Lagrangian
+from lagjax.rigid.body import RigidBody
+from lagjax.rigid.quaternion import (
+    quaternion_multiply,
+    quaternion_to_matrix,
+    rotation_vector_quaternion,
+)
 
 
 class LinearizedSystem(eqx.Module):
@@ -230,12 +237,6 @@ def _hamiltonian_parts(ham: AbstractHamiltonian, state, t, args, inputs) -> _Par
 
 
 def _rigid_body_parts(body, state, t, args, inputs) -> _Parts:
-    from lagjax.rigid.quaternion import (
-        quaternion_multiply,
-        quaternion_to_matrix,
-        rotation_vector_quaternion,
-    )
-
     if not (isinstance(state, (tuple, list)) and len(state) == 2):
         raise ValueError(
             "for a rigid body the equilibrium is the state (quaternion, "
@@ -272,8 +273,6 @@ def _rigid_body_parts(body, state, t, args, inputs) -> _Parts:
 
 
 def _parts(system, state, t, args, inputs) -> _Parts:
-    from lagjax.rigid.body import RigidBody
-
     if isinstance(system, Lagrangian):
         return _lagrangian_parts(system, state, t, args, inputs)
     if isinstance(system, AbstractHamiltonian):
@@ -314,11 +313,8 @@ def linearize(
     **Returns:** a `LinearizedSystem` (unpacks as `A, B`), with the eigenvalues of
     A and a stability verdict. See the module docstring for each system's state.
     """
-    from lagjax.scenes.base import AbstractScene
-
-    if isinstance(system, AbstractScene):
-        args = system if args is None else args
-        system = system.system()
+    if isinstance(system, AbstractSystem):
+        system, args = system.resolve(args)  # a scene: its system and itself
     jacobian, rate, parts = _derivatives(system, equilibrium, t, args, inputs)
     jacobian = _require_finite(jacobian, rate)
     if check_equilibrium:

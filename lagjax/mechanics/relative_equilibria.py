@@ -37,6 +37,7 @@ import numpy as np
 import optimistix as optx
 from jax.flatten_util import ravel_pytree
 
+from lagjax._core.system import AbstractSystem
 from lagjax.mechanics.hamiltonian import AbstractHamiltonian
 from lagjax.mechanics.lagrangian import Lagrangian
 from lagjax.mechanics.stability import is_concrete
@@ -134,11 +135,8 @@ def relative_equilibrium(
     classify it with `normal_modes` or `linearize`. Raises a `ValueError` with the
     remaining residual when Newton's method does not converge (outside `jax.jit`).
     """
-    from lagjax.scenes.base import AbstractScene
-
-    if isinstance(system, AbstractScene):
-        args = system if args is None else args
-        system = system.system()
+    if isinstance(system, AbstractSystem):
+        system, args = system.resolve(args)  # a scene: its system and itself
     if isinstance(system, AbstractHamiltonian):
         if not (isinstance(guess, (tuple, list)) and len(guess) == 2):
             raise ValueError(

@@ -22,7 +22,6 @@ import jax.numpy as jnp
 import numpy as np
 from jax.flatten_util import ravel_pytree
 
-from lagjax.mechanics.lagrangian import Lagrangian
 from lagjax.phase_space.flow import resolve_system
 
 _NEWTON_ITERATIONS = 30
@@ -30,9 +29,7 @@ _NEWTON_ITERATIONS = 30
 
 def _energy_function(system: Any, args: Any):
     mechanical, args = resolve_system(system, args)
-    if isinstance(mechanical, Lagrangian):
-        return lambda q, second: mechanical.energy(q, second, 0.0, args)
-    return lambda q, second: mechanical(q, second, 0.0, args)
+    return lambda q, second: mechanical.state_energy(q, second, 0.0, args)
 
 
 def states_on_energy_shell(

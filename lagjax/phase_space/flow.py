@@ -24,10 +24,8 @@ import jax
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
+from lagjax._core.system import AbstractSystem
 from lagjax._integrate.simulate import simulate
-from lagjax.mechanics.hamiltonian import AbstractHamiltonian
-from lagjax.mechanics.lagrangian import Lagrangian
-from lagjax.scenes.base import AbstractScene
 
 
 class PhaseFlow(eqx.Module):
@@ -69,11 +67,7 @@ class PhaseFlow(eqx.Module):
         """dy/dt on the flat state (Hamilton's or the Euler–Lagrange equations)."""
         q, second = self.unravel(y)
         mechanical, args = resolve_system(self.system, self.args)
-        if isinstance(mechanical, Lagrangian):
-            rate = (second, mechanical.acceleration(q, second, 0.0, args))
-        else:
-            rate = mechanical.vector_field(q, second, 0.0, args)
-        return ravel_pytree(rate)[0]
+        return ravel_pytree(mechanical.state_rate(q, second, 0.0, args))[0]
 
     def _flat_final(self, trajectory) -> jax.Array:
         second = trajectory.qdot if self.is_lagrangian else trajectory.p
@@ -83,22 +77,23 @@ class PhaseFlow(eqx.Module):
     @property
     def is_lagrangian(self) -> bool:
         mechanical, _ = resolve_system(self.system, self.args)
-        return isinstance(mechanical, Lagrangian)
+        return not mechanical.second_is_momentum
 
     def canonical(self, y: jax.Array) -> tuple[Any, Any]:
         """(q, p) of the flat state y."""
         q, second = self.unravel(y)
         mechanical, args = resolve_system(self.system, self.args)
-        if isinstance(mechanical, Lagrangian):
-            return q, mechanical.momentum(q, second, 0.0, args)
-        return q, second
+        return q, mechanical.state_momentum(q, second, 0.0, args)
 
 
 def resolve_system(system: Any, args: Any) -> tuple[Any, Any]:
     """A scene's system and the args it is integrated with (as `simulate` does)."""
-    if isinstance(system, AbstractScene):
-        return system.system(), system
-    return system, args
+    if not isinstance(system, AbstractSystem):
+        raise TypeError(
+            "Phase-space tools take a lagjax system (a Lagrangian, a Hamiltonian or a "
+            f"scene of one); got {type(system).__name__}"
+        )
+    return system.resolve(args)
 
 
 def phase_flow(
@@ -113,17 +108,9 @@ def phase_flow(
 ) -> tuple[PhaseFlow, jax.Array]:
     """The `PhaseFlow` of `system` and `y0` as a flat vector; checks the system."""
     mechanical, _ = resolve_system(system, args)
-    if not isinstance(mechanical, (Lagrangian, AbstractHamiltonian)):
-        raise ValueError(
-            f"Phase-space tools take a Lagrangian, a Hamiltonian or a scene of one; got "
-            f"{type(mechanical).__name__}. A rigid body's quaternion state has a "
-            "redundant direction: write its Lagrangian in Euler angles instead."
-        )
-    if isinstance(mechanical, Lagrangian) and mechanical.constraints is not None:
-        raise ValueError(
-            "A constrained Lagrangian moves on a submanifold, and tangent vectors off "
-            "it would add spurious exponents: write L in independent coordinates."
-        )
+    obstacle = mechanical.phase_space_obstacle()
+    if obstacle is not None:
+        raise ValueError(obstacle)
     if not (isinstance(y0, tuple) and len(y0) == 2):
         raise ValueError(
             "y0 must be the pair (q0, qdot0) for a Lagrangian or (q0, p0) for a "

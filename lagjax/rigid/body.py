@@ -39,7 +39,9 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from lagjax._core.solver_kinds import DefaultMethod
 from lagjax._core.system import AbstractSystem
+from lagjax._core.terms import RigidBodyTerm
 from lagjax.mechanics.functions import as_system_function
 from lagjax.mechanics.signature import call_with_arity, check_scalar, positional_arity
 from lagjax.rigid.inertia import check_moments
@@ -199,26 +201,43 @@ class RigidBody(AbstractSystem):
     def second_is_momentum(self) -> bool:
         return True
 
-    def default_solver(self, dt: Any) -> Any:
+    def default_method(self, dt: Any) -> DefaultMethod:
         """`RigidBodyYoshida4` (Lie–Poisson splitting) with `dt`, else adaptive
         `Tsit5` with the quaternion projected back to unit length."""
-        import diffrax
-
-        from lagjax.solvers.lie_poisson import QuaternionProjection, RigidBodyYoshida4
-
         if dt is None:
-            return QuaternionProjection(diffrax.Tsit5())
-        return RigidBodyYoshida4()
+            return DefaultMethod.ADAPTIVE_UNIT_QUATERNION
+        return DefaultMethod.LIE_POISSON
 
     def integration(self, solver: Any, y0: Any, t0: Any, args: Any) -> Any:
         """The `RigidBodyTerm`: any solver integrates it, Lie–Poisson ones read the
         body from it."""
-        from lagjax._core.terms import RigidBodyTerm
-
         return RigidBodyTerm(self), y0, self
 
     def state_velocity(self, q: Any, second: Any, t: Any, args: Any) -> Any:
         return self.velocity(q, second, t, args)
+
+    def state_rate(self, q: Any, second: Any, t: Any, args: Any) -> tuple[Any, Any]:
+        return self.vector_field(q, second, t, args)
+
+    def checked_state_pair(self, first: Any, second: Any) -> tuple[Any, Any]:
+        """(quaternion of shape (4,), nonzero; body momentum of shape (3,))."""
+        if jnp.shape(first) != (4,) or jnp.shape(second) != (3,):
+            raise ValueError(
+                "a RigidBody's y0 is (quaternion of shape (4,), body angular momentum "
+                f"of shape (3,)), got shapes {jnp.shape(first)} and "
+                f"{jnp.shape(second)}; RigidBody.state_from_angular_velocity builds one"
+            )
+        return check_nonzero_quaternion(first, "y0's quaternion"), second
+
+    def accepted_terms(self) -> tuple[type, ...]:
+        return (RigidBodyTerm,)
+
+    def phase_space_obstacle(self) -> str | None:
+        return (
+            f"Phase-space tools take a Lagrangian, a Hamiltonian or a scene of one; got "
+            f"{type(self).__name__}. A rigid body's quaternion state has a "
+            "redundant direction: write its Lagrangian in Euler angles instead."
+        )
 
     def state_momentum(self, q: Any, second: Any, t: Any, args: Any) -> Any:
         return second

@@ -54,7 +54,9 @@ import numpy as np
 from jax.core import Tracer
 from jax.flatten_util import ravel_pytree
 
+from lagjax._core.solver_kinds import DefaultMethod
 from lagjax._core.system import AbstractSystem
+from lagjax._core.system_protocols import LagrangianLike
 from lagjax.mechanics.hamiltonian import AbstractHamiltonian
 from lagjax.mechanics.lagrangian import Lagrangian
 
@@ -267,11 +269,37 @@ class AbstractScene(AbstractSystem):
         scenes, or a scene of other parameters)."""
         return self.system(), self if args is None else args
 
-    def default_solver(self, dt: Any) -> Any:
-        return self.system().default_solver(dt)
+    def default_method(self, dt: Any) -> DefaultMethod:
+        return self.system().default_method(dt)
 
-    def adapt_solver(self, solver: Any) -> Any:
-        return self.system().adapt_solver(solver)
+    def keeps_constraints(self) -> bool:
+        return self.system().keeps_constraints()
+
+    def state_rate(self, q: Any, second: Any, t: Any, args: Any) -> tuple[Any, Any]:
+        return self.system().state_rate(q, second, t, self if args is None else args)
+
+    def checked_state_pair(self, first: Any, second: Any) -> tuple[Any, Any]:
+        """The system's checks, and the shapes of `self.initial_state()`."""
+        first, second = self.system().checked_state_pair(first, second)
+        expected = jax.eval_shape(self.initial_state)
+        got = jax.tree_util.tree_map(jnp.shape, (first, second))
+        want = jax.tree_util.tree_map(lambda x: x.shape, tuple(expected))
+        if got != want:
+            raise ValueError(
+                f"{type(self).__name__}'s state has shapes {want} (as "
+                f"scene.initial_state() gives), got {got}; start from "
+                "scene.initial_state() and change its values"
+            )
+        return first, second
+
+    def accepted_terms(self) -> tuple[type, ...]:
+        return self.system().accepted_terms()
+
+    def default_span(self) -> tuple[float, float | None]:
+        return type(self).default_t1, type(self).default_dt
+
+    def phase_space_obstacle(self) -> str | None:
+        return self.system().phase_space_obstacle()
 
     def integration(self, solver: Any, y0: Any, t0: Any, args: Any) -> Any:
         args = self if args is None else args
@@ -290,7 +318,7 @@ class AbstractScene(AbstractSystem):
     def state_energy(self, q: Any, second: Any, t: Any, args: Any) -> Any:
         return self.system().state_energy(q, second, t, args)
 
-    def path_lagrangian(self) -> Lagrangian:
+    def path_lagrangian(self) -> LagrangianLike:
         return self.system().path_lagrangian()
 
     def conserves_energy_if_autonomous(self) -> bool:

@@ -23,6 +23,7 @@ import optimistix as optx
 from jax.flatten_util import ravel_pytree
 from jaxtyping import Array
 
+from lagjax._core.solver_kinds import AbstractSymplecticRungeKutta
 from lagjax.solvers.compensated import compensated_add, zero_compensation
 from lagjax.solvers.stage_iteration import StageIteration
 
@@ -168,7 +169,9 @@ class _StageEquations(eqx.Module):
         return _matmul(np.array(self.tableau.a), flat_slopes)
 
 
-class AbstractGaussLegendre(diffrax.AbstractImplicitSolver[_SolverState]):
+class AbstractGaussLegendre(
+    AbstractSymplecticRungeKutta, diffrax.AbstractImplicitSolver[_SolverState]
+):
     r"""Engine shared by [`GaussLegendre`][] and [`ImplicitMidpoint`][].
 
     One step of size h solves for the stage increments Zᵢ = Yᵢ − y₀,

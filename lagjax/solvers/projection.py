@@ -43,11 +43,12 @@ from jax.flatten_util import ravel_pytree
 
 from lagjax._core.batch_branch import any_in_batch
 from lagjax._core.precision import match_dtypes, newton_for
+from lagjax._core.solver_kinds import AbstractConstraintKeeping
+from lagjax._core.system_protocols import LagrangianLike
 from lagjax._core.terms import ConstrainedLagrangianTerm, unwrap_term
 from lagjax._linalg.in_step_root_find import root_find_in_step
-from lagjax._linalg.small_solves import solve_dense, solve_dense_in_step
+from lagjax._linalg.small_solves import singular_check, solve_dense, solve_dense_in_step
 from lagjax.mechanics.constraints import apply_rank_check, least_correction
-from lagjax.mechanics.lagrangian import Lagrangian, singular_check
 from lagjax.mechanics.scalar_constraints import (
     scalar_constraints_apply,
     scalar_position_projection,
@@ -196,7 +197,7 @@ def _project_velocities(lagrangian, q, qdot, t, args):
 
 
 def project_onto_constraints(
-    lagrangian: Lagrangian,
+    lagrangian: LagrangianLike,
     q: Any,
     qdot: Any,
     t: Any,
@@ -227,7 +228,7 @@ def project_onto_constraints(
     return (q, qdot), diffrax.RESULTS.promote(result)
 
 
-class ConstraintProjection(AbstractProjectedSolver):
+class ConstraintProjection(AbstractConstraintKeeping, AbstractProjectedSolver):
     r"""A diffrax solver on a constrained Lagrangian, projected after every step.
 
     `lj.simulate` wraps any plain diffrax solver (Tsit5, Dopri8, Kvaerno5, …) in it

@@ -39,6 +39,8 @@ import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
 from lagjax._core.precision import newton_for
+from lagjax._core.solver_kinds import AbstractConstraintKeeping
+from lagjax._core.system_protocols import LagrangianLike
 from lagjax._core.terms import RattleTerm, physical_step, unwrap_term
 from lagjax._linalg.in_step_root_find import root_find_in_step
 from lagjax._linalg.small_solves import (
@@ -49,11 +51,10 @@ from lagjax._linalg.small_solves import (
     solve_unrolled,
 )
 from lagjax.mechanics.constraints import Constraints
-from lagjax.mechanics.lagrangian import Lagrangian
 from lagjax.solvers.compensated import add_to_state, zero_compensation
 
 
-def _holonomic_constraints(lagrangian: Lagrangian) -> Constraints:
+def _holonomic_constraints(lagrangian: LagrangianLike) -> Constraints:
     """Trace-time check that RATTLE applies; returns the constraints."""
     constraints = lagrangian.constraints
     if constraints is None or constraints.holonomic is None:
@@ -96,7 +97,7 @@ def _raise_if_mass_varies(lagrangian, q0, t0, args, inverse_mass):
     )
 
 
-class Rattle(diffrax.AbstractSolver[_RattleState]):
+class Rattle(AbstractConstraintKeeping, diffrax.AbstractSolver[_RattleState]):
     r"""RATTLE for holonomic constraints (order 2, symplectic, symmetric).
 
     Use it through `lj.simulate(Lagrangian(L, constraints=g), (q0, qdot0), dt=...,
@@ -239,7 +240,7 @@ def _solve_symmetric(matrix: jax.Array, rhs: jax.Array) -> tuple[jax.Array, jax.
     return jnp.stack(x), singular
 
 
-def _potential_force(lagrangian: Lagrangian, q, t, args) -> jax.Array:
+def _potential_force(lagrangian: LagrangianLike, q, t, args) -> jax.Array:
     """−∂V/∂q = ∂L/∂q at q̇ = 0 (L = ½q̇ᵀMq̇ − V), raveled."""
     zero_velocity = jax.tree_util.tree_map(jnp.zeros_like, q)
     gradient = jax.grad(lagrangian, argnums=0)(q, zero_velocity, t, args)

@@ -53,6 +53,7 @@ from diffrax import (
     LocalLinearInterpolation,
 )
 
+from lagjax._core.solver_kinds import AbstractSplittingMethod
 from lagjax.solvers.compensated import compensated_add, zero_compensation
 from lagjax.solvers.splitting_tables import (
     BLANES_MOAN4_DRIFTS,
@@ -87,7 +88,7 @@ def _add(x: Any, y: Any) -> Any:
     return jax.tree_util.tree_map(lambda a, b: a + b, x, y)
 
 
-class AbstractSplittingSolver(AbstractSolver[_SplittingState]):
+class AbstractSplittingSolver(AbstractSplittingMethod, AbstractSolver[_SplittingState]):
     r"""A kick–drift–…–kick splitting method for $H = T(p) + V(q)$.
 
     Subclasses set `kick_coefficients` $b_0..b_s$ and `drift_coefficients`
@@ -113,10 +114,6 @@ class AbstractSplittingSolver(AbstractSolver[_SplittingState]):
     drift_coefficients: AbstractClassVar[tuple[float, ...]]
     nominal_order: AbstractClassVar[int]
     compensated: AbstractVar[bool]
-    # Runge–Kutta–Nyström tables keep their order only when T is quadratic in p;
-    # the system refuses them otherwise (SeparableHamiltonian.integration).
-    needs_quadratic_kinetic: ClassVar[bool] = False
-
     term_structure: ClassVar = (AbstractTerm, AbstractTerm)
     interpolation_cls: ClassVar[Callable[..., LocalLinearInterpolation]] = (
         LocalLinearInterpolation

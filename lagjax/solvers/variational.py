@@ -33,14 +33,14 @@ import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
 from lagjax._core.precision import newton_for
+from lagjax._core.system_protocols import LagrangianLike
 from lagjax._core.terms import LagrangianTerm, physical_step
 from lagjax._linalg.in_step_root_find import root_find_in_step
-from lagjax.mechanics.lagrangian import Lagrangian
 from lagjax.solvers.compensated import compensated_add, zero_compensation
 
 
 def discrete_lagrangian(
-    lagrangian: Lagrangian, q0, increment, t0, h, args
+    lagrangian: LagrangianLike, q0, increment, t0, h, args
 ) -> jax.Array:
     """Midpoint-rule discrete Lagrangian h·L(q0 + Δq/2, Δq/h, t0 + h/2), Δq = q1 − q0.
 

@@ -17,13 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.core import Tracer
 
-from lagjax._core.precision import cast_floats
 from lagjax._core.system import AbstractSystem
-from lagjax.mechanics.constraints import refuse_start_off_constraints
-from lagjax.mechanics.lagrangian import Lagrangian
-from lagjax.rigid.body import RigidBody
-from lagjax.rigid.quaternion import check_nonzero_quaternion
-from lagjax.scenes.base import AbstractScene
 
 
 def check_initial_state(system: AbstractSystem, y0: Any) -> Any:
@@ -39,69 +33,9 @@ def check_initial_state(system: AbstractSystem, y0: Any) -> Any:
         )
     first, second = y0
     _check_leaf_types(y0)
-    if isinstance(system, RigidBody):
-        y0 = (_checked_quaternion(first, second), second)
-    else:
-        _check_partners(system, first, second)
+    y0 = system.checked_state_pair(first, second)
     _check_finite(y0)
     return _floated(y0)
-
-
-def check_constrained_start(
-    system: AbstractSystem, y0: Any, t0: Any, args: Any, dtype: Any
-) -> None:
-    """A constrained Lagrangian's start must lie on its constraints.
-
-    Checked here, on concrete values in the run's `dtype`, because the compiled run
-    sees traced values and could only attach the error at run time, without the
-    residuals in the message. `system` and `args` are the resolved ones
-    (`AbstractSystem.resolve`).
-    """
-    if not isinstance(system, Lagrangian) or system.constraints is None:
-        return
-    q0, qdot0 = cast_floats(tuple(y0), dtype)
-    constraints = cast_floats(system.constraints, dtype)
-    refuse_start_off_constraints(constraints, q0, qdot0, t0, cast_floats(args, dtype))
-
-
-def check_scene_state(scene: AbstractScene, y0: Any) -> None:
-    """A scene knows its state's shapes: those of `scene.initial_state()`."""
-    expected = jax.eval_shape(scene.initial_state)
-    got = jax.tree_util.tree_map(jnp.shape, tuple(y0))
-    want = jax.tree_util.tree_map(lambda x: x.shape, tuple(expected))
-    if got != want:
-        raise ValueError(
-            f"{type(scene).__name__}'s state has shapes {want} (as "
-            f"scene.initial_state() gives), got {got}; start from "
-            "scene.initial_state() and change its values"
-        )
-
-
-def _check_partners(system: AbstractSystem, q: Any, second: Any) -> None:
-    partner = "p0" if system.second_is_momentum else "qdot0"
-    q_leaves, q_tree = jax.tree_util.tree_flatten(q)
-    s_leaves, s_tree = jax.tree_util.tree_flatten(second)
-    if q_tree != s_tree:
-        raise ValueError(
-            f"q0 and {partner} must have the same structure, got {q_tree} and "
-            f"{s_tree}: give {partner} one entry per coordinate of q0"
-        )
-    for a, b in zip(q_leaves, s_leaves):
-        if jnp.shape(a) != jnp.shape(b):
-            raise ValueError(
-                f"q0 and {partner} must have the same shapes, got {jnp.shape(a)} and "
-                f"{jnp.shape(b)}: give {partner} one entry per coordinate of q0"
-            )
-
-
-def _checked_quaternion(quaternion: Any, momentum: Any) -> Any:
-    if jnp.shape(quaternion) != (4,) or jnp.shape(momentum) != (3,):
-        raise ValueError(
-            "a RigidBody's y0 is (quaternion of shape (4,), body angular momentum of "
-            f"shape (3,)), got shapes {jnp.shape(quaternion)} and "
-            f"{jnp.shape(momentum)}; RigidBody.state_from_angular_velocity builds one"
-        )
-    return check_nonzero_quaternion(quaternion, "y0's quaternion")
 
 
 def _check_leaf_types(y0: Any) -> None:

@@ -41,14 +41,9 @@ import numpy as np
 from jax.core import Tracer
 
 from lagjax._core.system import AbstractSystem
-from lagjax._core.terms import RattleTerm, RigidBodyTerm
 from lagjax._integrate.checks.initial_state import (
     check_initial_state,
-    check_scene_state,
 )
-from lagjax.mechanics.lagrangian import Lagrangian
-from lagjax.rigid.body import RigidBody
-from lagjax.scenes.base import AbstractScene
 
 # More steps than this cannot finish in a session (at ~10 ns a step, 10⁹ steps
 # take 10 s for the cheapest system; a typical one takes minutes).
@@ -84,22 +79,19 @@ def check_simulate_inputs(
     check_times(t0, t1, dt)
     check_save_times(ts, t0, t1)
     del args  # a scene's parameters are its fields; nothing to check in args
-    y0 = check_initial_state(_user_system(system), y0)
-    if isinstance(system, AbstractScene):
-        check_scene_state(system, y0)
-    return y0
+    return check_initial_state(system, y0)
 
 
 def _user_system(system: Any) -> Any:
     """The system whose convention `y0` follows (a scene's `system()`)."""
-    return system.system() if isinstance(system, AbstractScene) else system
+    return system.resolve(None)[0]
 
 
 def check_system(system: Any) -> None:
     """`system` must be a lagjax system instance."""
-    if isinstance(system, (AbstractSystem, AbstractScene)):
+    if isinstance(system, AbstractSystem):
         return
-    if isinstance(system, type) and issubclass(system, (AbstractSystem, AbstractScene)):
+    if isinstance(system, type) and issubclass(system, AbstractSystem):
         raise TypeError(
             f"system is the class {system.__name__}, not an instance: pass "
             f"{system.__name__}(...) (a scene: {system.__name__}() for its defaults)"
@@ -153,24 +145,8 @@ def check_solver(solver: Any) -> None:
 
 def check_solver_fits(system: Any, solver: Any) -> None:
     """Solvers written for one kind of system refuse the others by name."""
-    structure = None if solver is None else solver.term_structure
-    if not isinstance(structure, type):
-        return
-    name, kind = type(solver).__name__, type(system).__name__
-    if issubclass(structure, RigidBodyTerm) and not isinstance(system, RigidBody):
-        raise TypeError(
-            f"{name} is a Lie–Poisson solver for a lagjax.RigidBody (state: unit "
-            f"quaternion and body angular momentum); {kind} is not one. Use a solver "
-            "for generalized coordinates (GaussLegendre, Tsit5, a splitting method "
-            "for separable H); a rigid scene gives its body as scene.rigid_body()"
-        )
-    constrained = isinstance(system, Lagrangian) and system.constraints is not None
-    if issubclass(structure, RattleTerm) and not constrained:
-        raise TypeError(
-            f"{name} integrates a constrained Lagrangian, "
-            f"lagjax.Lagrangian(L, constraints=g); {kind} has no constraints. Use "
-            "StormerVerlet (separable H), GaussLegendre or Tsit5"
-        )
+    if solver is not None:
+        system.refuse_solver(solver)
 
 
 def check_max_steps(max_steps: Any) -> None:

@@ -1,0 +1,56 @@
+"""The kinds of solver a system tells apart, and the default methods it may ask for.
+
+A system builds different diffrax terms for different kinds of solver: a splitting
+method gets the (drift, kick) pair of a separable H, a symplectic implicit
+Runge–Kutta method gets Hamilton's equations of a Lagrangian's Legendre transform,
+and a constrained Lagrangian accepts only solvers that keep its constraints. The
+systems dispatch on these abstract kinds; the concrete solvers in `lagjax.solvers`
+subclass them. So neither imports the other.
+
+A system does not name its default solver either: it names a `DefaultMethod`, and
+`lagjax._integrate.solver_choice` (above both systems and solvers) turns that into
+a solver.
+"""
+
+from __future__ import annotations
+
+import enum
+from typing import ClassVar
+
+import diffrax
+
+
+def is_partitioned(solver: diffrax.AbstractSolver) -> bool:
+    """True for solvers that step (q, p) with two terms (splitting methods)."""
+    structure = solver.term_structure
+    return isinstance(structure, tuple) and len(structure) == 2
+
+
+class AbstractSplittingMethod(diffrax.AbstractSolver):
+    """A splitting method for H = T(p) + V(q), stepping the (drift, kick) terms."""
+
+    # Runge–Kutta–Nyström tables keep their order only when T is quadratic in p;
+    # the system refuses them otherwise (SeparableHamiltonian.integration).
+    needs_quadratic_kinetic: ClassVar[bool] = False
+
+
+class AbstractSymplecticRungeKutta(diffrax.AbstractSolver):
+    """A symplectic implicit Runge–Kutta method on one term of Hamilton's equations;
+    a Lagrangian is integrated on the (q, p) of its Legendre transform."""
+
+
+class AbstractConstraintKeeping(diffrax.AbstractSolver):
+    """A solver that keeps a constrained Lagrangian on its constraints (a projection
+    after each step, or RATTLE)."""
+
+
+class DefaultMethod(enum.Enum):
+    """The method a system asks for when the caller names no solver."""
+
+    ADAPTIVE = "adaptive Runge–Kutta (Tsit5)"
+    ADAPTIVE_UNIT_QUATERNION = (
+        "adaptive Runge–Kutta, quaternion projected to unit length"
+    )
+    SYMPLECTIC_RUNGE_KUTTA = "Gauss–Legendre, 2 stages (implicit, symplectic, order 4)"
+    SPLITTING = "Yoshida4 (explicit splitting, symplectic, order 4)"
+    LIE_POISSON = "Lie–Poisson splitting of a rigid body (RigidBodyYoshida4)"
