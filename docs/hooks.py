@@ -35,3 +35,22 @@ def on_config(config: Any) -> Any:
             return config
     config["nav"].append({SECTION: entries})
     return config
+
+
+# README.md is the site's home page (docs/index.md stands for it); its links point
+# from the repository root, so on the site they are rewritten to the docs pages.
+_README_LINKS = {
+    "](docs/guide.md)": "](guide.md)",
+    "](docs/performance.md)": "](performance.md)",
+    "](CHANGELOG.md)": "](changelog.md)",
+    "](CONTRIBUTING.md)": "](contributing.md)",
+}
+
+
+def on_page_markdown(markdown: str, page: Any, config: Any, **_: Any) -> str:
+    if page.file.src_uri != "index.md":
+        return markdown
+    markdown = (Path(config["docs_dir"]).parent / "README.md").read_text()
+    for old, new in _README_LINKS.items():
+        markdown = markdown.replace(old, new)
+    return markdown

@@ -1,6 +1,7 @@
-"""Every ```python block of README.md runs, so the guide cannot drift from the code.
+"""Every ```python block of README.md and docs/guide.md runs, so the guide cannot
+drift from the code.
 
-The blocks run in the README's order in one namespace, as a reader would paste them
+The blocks run in order (the README's, then the guide's) in one namespace, as a reader would paste them
 into one session (a later block may use an earlier block's imports), with matplotlib
 on its file-only Agg backend so `plt.show()` returns at once. Nothing is skipped.
 """
@@ -18,19 +19,22 @@ import pytest
 # (`bash tasks.sh integration`).
 pytestmark = pytest.mark.integration
 
-README = Path(__file__).resolve().parent.parent / "README.md"
+ROOT = Path(__file__).resolve().parent.parent
+PAGES = [ROOT / "README.md", ROOT / "docs" / "guide.md"]
 FENCE = re.compile(r"^```python\n(.*?)^```", re.MULTILINE | re.DOTALL)
 ANY_FENCE = re.compile(r"^```.*?^```", re.MULTILINE | re.DOTALL)
 
 
 def _blocks() -> list[tuple[str, str]]:
     """(the heading above the block, its code) for every ```python block."""
-    text = README.read_text()
     blocks = []
-    for match in FENCE.finditer(text):
-        prose = ANY_FENCE.sub("", text[: match.start()])  # no comments as headings
-        headings = re.findall(r"^#+ (.+)$", prose, re.MULTILINE)
-        blocks.append((headings[-1] if headings else "top", match.group(1)))
+    for page in PAGES:
+        text = page.read_text()
+        for match in FENCE.finditer(text):
+            prose = ANY_FENCE.sub("", text[: match.start()])  # no comments as headings
+            headings = re.findall(r"^#+ (.+)$", prose, re.MULTILINE)
+            heading = headings[-1] if headings else "top"
+            blocks.append((f"{page.name}: {heading}", match.group(1)))
     return blocks
 
 
@@ -49,7 +53,7 @@ def test_readme_blocks_run_in_order():
             exec(compile(code, f"README.md, block {number}", "exec"), namespace)
         except Exception as error:
             raise AssertionError(
-                f"README block {number} (under '{heading}') failed: {error!r}"
+                f"block {number} (under '{heading}') failed: {error!r}"
             ) from error
         finally:
             plt.close("all")
