@@ -49,6 +49,7 @@ from lagjax._core.precision import cast_floats, working_dtype
 from lagjax._core.static_values import Constant
 from lagjax._core.system import AbstractSystem
 from lagjax._integrate.checks.inputs import check_simulate_inputs
+from lagjax._integrate.checks.late_failure import raise_if_failed
 from lagjax._integrate.checks.run_verdict import (
     NON_FINITE_MESSAGE as _NON_FINITE_MESSAGE,
 )
@@ -158,17 +159,30 @@ def simulate(
     system, args = system.resolve(args)
     # The run works in y0's precision; float inputs follow it (lagjax._core.precision).
     dtype = working_dtype(y0)
-    solver = chosen_solver(system, solver, dt)
+    solver = chosen_solver(system, solver, dt, rtol)
     system.check_start(y0, t0, args, dtype)
     if dt is not None or not isinstance(
         stepsize_controller, (diffrax.AbstractAdaptiveStepSizeController, type(None))
     ):
         solver = with_implicit_tolerances(solver, rtol, atol)
+    # A concrete adaptive run is diagnosed after its compiled call, in one plain
+    # error that keeps what was computed (`checks.late_failure`).
+    late = throw and dt is None and not _traced(system, y0, args, ts)
     run = _Run(t0, t1, dt, _save_times(ts, dtype), rtol, atol, max_steps, progress,
-               saveat, adjoint, throw, dtype, dense, event, stepsize_controller,
-               progress_meter)  # fmt: skip
+               saveat, adjoint, throw and not late, dtype, dense, event,
+               stepsize_controller, progress_meter)  # fmt: skip
     scan = run.fits_scan()
-    return _compiled_run(system, y0, args, solver, _for_compiled_call(run, scan), scan)
+    trajectory = _compiled_run(
+        system, y0, args, solver, _for_compiled_call(run, scan), scan
+    )
+    if late:
+        raise_if_failed(trajectory, trajectory.stats["max_steps"], rtol)
+    return trajectory
+
+
+def _traced(*trees: Any) -> bool:
+    leaves = jax.tree_util.tree_leaves(trees)
+    return any(isinstance(leaf, Tracer) for leaf in leaves)
 
 
 @eqx.filter_jit

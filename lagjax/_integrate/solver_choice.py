@@ -37,10 +37,33 @@ _DEFAULTS: dict[DefaultMethod, Callable[[], diffrax.AbstractSolver]] = {
 }
 
 
-def default_solver(system: AbstractSystem, dt: Any) -> diffrax.AbstractSolver:
+# Below this relative tolerance a fifth-order method needs thousands of steps per
+# unit time (Tsit5 on the double pendulum at 1e-12: 24,000 steps to t = 100);
+# an eighth-order one a tenth of that.
+HIGH_ORDER_RTOL = 1e-9
+
+
+def default_solver(
+    system: AbstractSystem, dt: Any, rtol: float | None = None
+) -> diffrax.AbstractSolver:
     """The solver that runs `system` when the caller names none (before
-    `adapt_solver`): fixed step when `dt` is given, adaptive otherwise."""
-    return _DEFAULTS[system.default_method(dt)]()
+    `adapt_solver`): fixed step when `dt` is given, adaptive otherwise — `Dopri8`
+    instead of `Tsit5` when `rtol` is below `HIGH_ORDER_RTOL`."""
+    solver = _DEFAULTS[system.default_method(dt)]()
+    if dt is None and rtol is not None and rtol < HIGH_ORDER_RTOL:
+        solver = _higher_order(solver)
+    return solver
+
+
+def _higher_order(solver: diffrax.AbstractSolver) -> diffrax.AbstractSolver:
+    """Tsit5 → Dopri8, inside a projection wrapper too."""
+    if isinstance(solver, diffrax.Tsit5):
+        return diffrax.Dopri8()
+    if isinstance(solver, QuaternionProjection) and isinstance(
+        solver.solver, diffrax.Tsit5
+    ):
+        return QuaternionProjection(diffrax.Dopri8())
+    return solver
 
 
 def adapt_solver(
@@ -67,9 +90,12 @@ def adapt_solver(
 
 
 def chosen_solver(
-    system: AbstractSystem, solver: diffrax.AbstractSolver | None, dt: Any
+    system: AbstractSystem,
+    solver: diffrax.AbstractSolver | None,
+    dt: Any,
+    rtol: float | None = None,
 ) -> diffrax.AbstractSolver:
     """`adapt_solver` of the requested solver, or of the default when none is."""
-    return adapt_solver(
-        system, default_solver(system, dt) if solver is None else solver
-    )
+    if solver is None:
+        solver = default_solver(system, dt, rtol)
+    return adapt_solver(system, solver)
