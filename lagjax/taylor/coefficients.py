@@ -28,6 +28,7 @@ import jax
 import jax.numpy as jnp
 
 from .graph import Graph, lower
+from .recurrences import with_coefficient
 
 
 def lower_vector_field(
@@ -67,10 +68,12 @@ def _sweep(graph: Graph, values: dict, series: dict, k: Any) -> dict:
         outputs = tuple(series[o] for o in op.outs)
         new = op.rule.coefficient(k, inputs, outputs)
         for o, c in zip(op.outs, new):
-            series[o] = series[o].at[k].set(c.astype(series[o].dtype))
+            series[o] = with_coefficient(series[o], k, c)
     y = graph.inputs[1]
     if graph.output in graph.series:
-        series[y] = series[y].at[k + 1].set(series[graph.output][k] / (k + 1))
+        series[y] = with_coefficient(
+            series[y], k + 1, series[graph.output][k] / (k + 1)
+        )
     return series
 
 
@@ -84,26 +87,31 @@ def graph_coefficients(
     unroll: bool = True,
 ) -> jax.Array:
     """y₀..y_order, shape (order + 1, *y0.shape), from a lowered graph."""
-    size = order + 1
+    order + 1
     t0 = jnp.asarray(t0, dtype=y0.dtype)
     values = _order_zero(graph, [t0, y0, *leaves])
     series = {}
     for i in graph.series:
         if i in values:
             start = jnp.asarray(values[i], dtype=graph.avals[i].dtype)
-            series[i] = jnp.zeros((size, *start.shape), start.dtype).at[0].set(start)
+            series[i] = [start] + [jnp.zeros_like(start)] * order
     t, y = graph.inputs[:2]
     if t in series:
-        series[t] = series[t].at[1].set(1.0)
-    series[y] = series[y].at[1].set(jnp.asarray(values[graph.output], y0.dtype))
+        series[t] = with_coefficient(series[t], 1, jnp.ones_like(t0))
+    f0 = jnp.asarray(values[graph.output], y0.dtype)
+    series[y] = with_coefficient(series[y], 1, f0)
     if unroll:
         for k in range(1, order):
             series = _sweep(graph, values, series, k)
-    else:
-        series = jax.lax.fori_loop(
-            1, max(order, 1), lambda k, s: _sweep(graph, values, s, k), series
-        )
-    return series[y]
+            # Stop XLA from fusing (and recomputing) one order's values into
+            # every later order's kernels.
+            series = jax.lax.optimization_barrier(series)
+        return jnp.stack(series[y])
+    arrays = {i: jnp.stack(s) for i, s in series.items()}
+    arrays = jax.lax.fori_loop(
+        1, max(order, 1), lambda k, s: _sweep(graph, values, s, k), arrays
+    )
+    return arrays[y]
 
 
 def taylor_coefficients(

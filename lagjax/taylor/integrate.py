@@ -11,11 +11,12 @@ idle). The order p is fixed for a run (it sets array shapes); the step adapts.
 What works under transformations:
 
 - `jax.jit`, `jax.vmap` over y0, args, t0, t1 and ts;
-- `jax.jvp` / `jax.jacfwd` with respect to y0, args and t1;
-- `jax.grad` / `jax.jacrev` with respect to y0 and args (the outer loop is
-  equinox's checkpointed `while_loop`), as long as at most
-  `SMALL_SAVES` save times are requested (more use an inner `while_loop`,
-  which reverse mode cannot enter: use forward mode there).
+- `jax.grad` / `jax.jacrev` with respect to y0 and args (the loop is equinox's
+  checkpointed `while_loop`), as long as at most `SMALL_SAVES` save times are
+  requested (more use an inner `while_loop`, which reverse mode cannot enter);
+- `jax.jvp` / `jax.jacfwd` with respect to y0, args and t1 with
+  `forward_mode=True` (a plain `lax.while_loop`: the checkpointed loop is a
+  `custom_vjp`, which forward mode cannot enter), for any number of saves.
 
 The step length is a control decision, not part of the solution, so it is held
 out of differentiation (`stop_gradient`); derivatives are those of the step
@@ -154,13 +155,17 @@ def taylor_integrate(
     atol: Any = 1e-15,
     order: int | None = None,
     max_steps: int = 1_000_000,
-    unroll: bool = True,
+    forward_mode: bool = False,
+    unroll: bool = False,
 ) -> TaylorSolution:
     """Integrate y' = vector_field(t, y, args) from (t0, y0) to t1 by Taylor's
     method; y0 a flat float array. Returns the states at `ts` (default: [t1]),
     which must be ordered from t0 towards t1.
 
-    `unroll` chooses the sweep over the orders (see `coefficients`).
+    `forward_mode=True` runs a plain `lax.while_loop`, which `jax.jvp` /
+    `jax.jacfwd` can enter; the default is equinox's checkpointed loop, which
+    `jax.grad` can enter. `unroll` chooses the sweep over the orders (see
+    `coefficients`; unrolled compiles far longer).
     """
     p = resolve_order(rtol, atol, order)
     y0 = jnp.asarray(y0)
@@ -221,7 +226,7 @@ def taylor_integrate(
         body,
         init,
         max_steps=max_steps,
-        kind="checkpointed",
+        kind="lax" if forward_mode else "checkpointed",
         buffers=None if ts.shape[0] <= SMALL_SAVES else (lambda c: c.ys),
     )
     result = RESULTS.where(

@@ -26,10 +26,11 @@ where the output's own k-th coefficient, still zero when the sum is formed,
 drops out of the products it appears in. Each rule costs one transcendental
 function at order 0 and multiply-adds above.
 
-A series is stored as an array of shape (P, *shape) over the order axis with the
-entries above the current order zero; k is a Python int (an unrolled sweep over
-the orders, static slices) or a traced int (a `fori_loop` over the orders, a
-dynamic window). Fixed values (parameters, comparisons of order-0 values) are
+A series is either a Python list of P coefficient arrays with a Python int k
+(an unrolled sweep over the orders: straight-line arithmetic XLA fuses), or an
+array of shape (P, *shape) over the order axis with a traced k (a `fori_loop`
+over the orders: a dynamic window); in both the entries above the current order
+are zero. Fixed values (parameters, comparisons of order-0 values) are
 plain arrays and contribute to order 0 only.
 
 References:
@@ -58,17 +59,29 @@ def _window(b: jax.Array, k: Any) -> jax.Array:
     return jax.lax.dynamic_slice_in_dim(reversed_padded, size - 1 - k, size)
 
 
-def cauchy(a: jax.Array, b: jax.Array, k: Any) -> jax.Array:
-    """(a ⋆ b)ₖ = Σ_{j=0}^{k} aⱼ bₖ₋ⱼ, over the leading (order) axis."""
-    if isinstance(k, int):
-        return jnp.sum(a[: k + 1] * b[k::-1], axis=0)
+def cauchy(a: Any, b: Any, k: Any) -> jax.Array:
+    """(a ⋆ b)ₖ = Σ_{j=0}^{k} aⱼ bₖ₋ⱼ."""
+    if isinstance(a, list):
+        total = a[0] * b[k]
+        for j in range(1, k + 1):
+            total = total + a[j] * b[k - j]
+        return total
     return jnp.sum(a * _window(b, k), axis=0)
 
 
-def weighted(a: jax.Array) -> jax.Array:
+def weighted(a: Any) -> Any:
     """(j aⱼ)ⱼ: the coefficients of τ a'(τ)."""
+    if isinstance(a, list):
+        return [jnp.zeros_like(a[0])] + [j * x for j, x in enumerate(a[1:], 1)]
     j = jnp.arange(a.shape[0], dtype=a.dtype).reshape((-1,) + (1,) * (a.ndim - 1))
     return j * a
+
+
+def with_coefficient(x: Any, k: Any, value: jax.Array) -> Any:
+    """x with its k-th coefficient set to `value`."""
+    if isinstance(x, list):
+        return [value if j == k else c for j, c in enumerate(x)]
+    return x.at[k].set(value.astype(x.dtype))
 
 
 def coefficient(x: jax.Array, k: Any, series: bool) -> jax.Array:
@@ -161,9 +174,10 @@ class Product(AbstractPrimitiveRule):
         if self.primitive.name == "mul":
             return (cauchy(a, b, k),)
         # A bilinear map of arrays: the same sum with the map in place of `*`.
-        pairs = (a[: k + 1], b[k::-1]) if isinstance(k, int) else (a, _window(b, k))
-        terms = jax.vmap(lambda u, v: self.primitive.bind(u, v, **self.params))(*pairs)
-        return (jnp.sum(terms, axis=0),)
+        bind = lambda u, v: self.primitive.bind(u, v, **self.params)
+        if isinstance(a, list):
+            return (sum(bind(a[j], b[k - j]) for j in range(k + 1)),)
+        return (jnp.sum(jax.vmap(bind)(a, _window(b, k)), axis=0),)
 
 
 class Quotient(AbstractPrimitiveRule):
@@ -265,7 +279,7 @@ class TanLike(AbstractRule):
     def coefficient(self, k, inputs, outputs):
         (a,), (t, u) = inputs, outputs
         tk = cauchy(weighted(a), u, k) / k
-        t = t.at[k].set(tk)
+        t = with_coefficient(t, k, tk)
         square = cauchy(t, t, k)
         return (tk, -square if self.hyperbolic else square)
 

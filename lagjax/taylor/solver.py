@@ -25,12 +25,14 @@ from .integrate import TaylorSolution, check_tolerance, resolve_order, taylor_in
 
 class Taylor(eqx.Module):
     """Adaptive-order Taylor integration: `rtol`, `atol` (positive), `order`
-    (None: from the tolerance), `max_steps`."""
+    (None: from the tolerance), `max_steps`, `forward_mode` (True for
+    `jax.jvp`/`jax.jacfwd` through the run, False for `jax.grad`)."""
 
     rtol: float = 1e-15
     atol: float = 1e-15
     order: int | None = eqx.field(static=True, default=None)
     max_steps: int = eqx.field(static=True, default=1_000_000)
+    forward_mode: bool = eqx.field(static=True, default=False)
 
     def __check_init__(self):
         check_tolerance("rtol", self.rtol)
@@ -64,4 +66,5 @@ class Taylor(eqx.Module):
             atol=self.atol,
             order=self.order,
             max_steps=self.max_steps,
+            forward_mode=self.forward_mode,
         )
