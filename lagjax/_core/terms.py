@@ -132,6 +132,21 @@ def unwrap_term(terms: Any, kind: type[_Term]) -> tuple[_Term, Any]:
     return terms, direction
 
 
+def time_direction(terms: Any) -> Any:
+    """+1, or −1 when diffrax integrates t1 < t0 in reversed time: the product of
+    the directions of the wrappers around the first term (diffrax wraps every term
+    alike; its `WrapTerm` is not public API, so it is read by its `term` and
+    `direction` attributes, as in `unwrap_term`)."""
+    term = jax.tree_util.tree_leaves(
+        terms, is_leaf=lambda x: isinstance(x, diffrax.AbstractTerm)
+    )[0]
+    direction = 1
+    while getattr(term, "term", None) is not None and hasattr(term, "direction"):
+        direction = direction * term.direction
+        term = term.term
+    return direction
+
+
 def physical_step(
     terms: Any, kind: type[_Term], t0: Any, t1: Any
 ) -> tuple[_Term, Any, Any]:

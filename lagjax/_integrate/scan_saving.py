@@ -36,7 +36,6 @@ import diffrax
 import jax
 import jax.numpy as jnp
 import numpy as np
-from diffrax._saveat import save_y
 
 from lagjax._integrate.fixed_step_loop import (
     fixed_step_count,
@@ -44,9 +43,12 @@ from lagjax._integrate.fixed_step_loop import (
     integrate_fixed_steps,
 )
 from lagjax._integrate.off_grid_saves import integrate_off_grid, off_grid_schedule
-from lagjax._integrate.step_control import fixed_step_count_or_none
+from lagjax._integrate.step_control import diffrax_step_bound
 from lagjax._integrate.time_grid import grid_step
 from lagjax.solvers.hermite import with_dense_output
+
+# diffrax's default `SubSaveAt.fn` (save the state itself), without its private module.
+_SAVE_STATE = diffrax.SubSaveAt(t1=True).fn
 
 
 class ScanSaving(NamedTuple):
@@ -78,7 +80,11 @@ def scan_saving(
     else:
         sub = saveat.subs
         extras = saveat.solver_state or saveat.controller_state or saveat.made_jump
-        if extras or not isinstance(sub, diffrax.SubSaveAt) or sub.fn is not save_y:
+        if (
+            extras
+            or not isinstance(sub, diffrax.SubSaveAt)
+            or sub.fn is not _SAVE_STATE
+        ):
             return None
         dense = dense or saveat.dense
     step = math.copysign(abs(grid_step(t0, t1, dt, dtype)), t1 - t0)
@@ -100,7 +106,7 @@ def scan_saving(
             if schedule is None:
                 return None
     # diffeqsolve's default for fixed steps (simulate._diffeqsolve).
-    limit = max_steps or fixed_step_count_or_none(t0, t1, dt)
+    limit = max_steps or diffrax_step_bound(t0, t1, dt)
     assert limit is not None  # concrete times
     return ScanSaving(step, sub.t0, times, sub.steps, sub.t1, dense, limit, schedule)
 

@@ -66,9 +66,8 @@ from lagjax._integrate.scan_saving import ScanSaving, integrate_saving, scan_sav
 from lagjax._integrate.solver_choice import chosen_solver
 from lagjax._integrate.step_control import (
     as_python_number,
-    check_span,
     defaults,
-    fixed_step_count_or_none,
+    diffrax_step_bound,
     stepping,
     with_implicit_tolerances,
 )
@@ -149,7 +148,6 @@ def simulate(
     if progress and progress_meter is not None:
         raise ValueError("pass progress=True or progress_meter, not both")
     t0, t1, dt = (as_python_number(x) for x in (t0, t1, dt))
-    check_span(t0, t1, dt)
     if not isinstance(system, AbstractSystem):
         raise TypeError(
             "simulate needs a lagjax system (Lagrangian, Hamiltonian, "
@@ -383,7 +381,7 @@ def _diffeqsolve(terms, solver, state0, args, run: _Run):
         fixed = run.controller is None or isinstance(
             run.controller, diffrax.ConstantStepSize
         )
-        max_steps = (fixed and fixed_step_count_or_none(t0, t1, dt)) or 100_000
+        max_steps = (fixed and diffrax_step_bound(t0, t1, dt)) or 100_000
     # diffrax promotes the state to the dtype of the times: give it the state's.
     t0, t1 = jnp.asarray(t0, dtype=dtype), jnp.asarray(t1, dtype=dtype)
     dt0 = None if dt0 is None else jnp.asarray(dt0, dtype=dtype)

@@ -20,6 +20,8 @@ import jax
 import numpy as np
 import optimistix as optx
 
+from lagjax._core.system import DEFAULT_T1, AbstractSystem
+
 
 def with_implicit_tolerances(
     solver: diffrax.AbstractSolver, rtol: float, atol: float
@@ -94,6 +96,8 @@ def defaults(system, t0, t1, dt, solver, controller):
     default run — its default solver (`solver_choice.default_solver`) at its `default_dt` — as the
     command line does it.
     """
+    if not isinstance(system, AbstractSystem):  # refused by name in the checks
+        return (DEFAULT_T1 if t1 is None else t1), dt
     default_t1, default_dt = system.default_span()
     if t1 is None:
         t1 = default_t1
@@ -122,21 +126,11 @@ def as_python_number(x: Any) -> Any:
     return x
 
 
-def check_span(t0, t1, dt):
-    concrete = all(isinstance(x, (int, float)) for x in (t0, t1))
-    if concrete and t1 == t0:
-        raise ValueError(f"t1 must differ from t0, both are {t0}")
-    if dt is not None and isinstance(dt, (int, float)):
-        if dt == 0 or not math.isfinite(dt):
-            raise ValueError(f"dt must be a finite non-zero number, got {dt}")
-        if concrete and (t1 - t0) * dt < 0:
-            raise ValueError(
-                f"dt = {dt} points away from t1 = {t1} (t0 = {t0}); use dt of the same "
-                "sign as t1 - t0"
-            )
-
-
-def fixed_step_count_or_none(t0, t1, dt) -> int | None:
+def diffrax_step_bound(t0, t1, dt) -> int | None:
+    """An upper bound on the steps diffrax's loop takes over [t0, t1] at `dt` (its
+    `max_steps`), or None for traced times. Unlike `fixed_step_count` (the exact
+    count of the scan, which forgives a ratio off an integer by 1e-9), it rounds
+    up past any round-off of the accumulated times and adds one step."""
     if dt is None or not all(isinstance(x, (int, float)) for x in (t0, t1, dt)):
         return None
     return math.ceil(abs((t1 - t0) / dt) * (1 + 1e-12)) + 1

@@ -41,8 +41,8 @@ import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from diffrax._misc import linear_rescale
-from diffrax._term import WrapTerm
+
+from lagjax._core.terms import time_direction
 
 # The quintic Hermite polynomial p(s) = Σ c_j s^j through y0, y1, k0, k1, m0, m1
 # (k = h y', m = h² y''): rows are the powers s⁵ … s⁰ (numpy.polyval order), columns
@@ -86,7 +86,7 @@ class QuinticHermiteInterpolation(diffrax.AbstractLocalInterpolation):
             return jax.tree_util.tree_map(
                 jnp.subtract, self.evaluate(t1), self.evaluate(t0)
             )
-        s = linear_rescale(self.t0, t0, self.t1)
+        s = _fraction_of_step(self.t0, t0, self.t1)
 
         def polynomial(coeffs):
             with jax.numpy_dtype_promotion("standard"):
@@ -166,7 +166,7 @@ class HermiteDenseOutput(diffrax.AbstractWrappedSolver):
         # A backward run (t1 < t0) reaches the solver in reversed time τ = −t, with
         # diffrax's direction in the terms' `contr` and not in `vf`: the slopes the
         # Hermite polynomial needs are dy/dτ = direction · f.
-        direction = _time_direction(terms)
+        direction = time_direction(terms)
 
         def field(time, state):
             rate = self.solver.func(terms, time, state, args)
@@ -196,18 +196,12 @@ class HermiteDenseOutput(diffrax.AbstractWrappedSolver):
         return state[0]
 
 
-def _time_direction(terms: Any) -> Any:
-    """+1, or −1 when diffrax integrates t1 < t0 in reversed time: the product of
-    the `direction`s of the time-direction wrappers around the first term (diffrax
-    wraps every term alike; `WrapTerm` is not public API, see `lagjax._core.terms`)."""
-    term = jax.tree_util.tree_leaves(
-        terms, is_leaf=lambda x: isinstance(x, diffrax.AbstractTerm)
-    )[0]
-    direction = 1
-    while isinstance(term, WrapTerm):
-        direction = direction * term.direction
-        term = term.term
-    return direction
+def _fraction_of_step(start: Any, t: Any, end: Any) -> Any:
+    """(t − start)/(end − start), and 0 on a zero-length step (no division by 0, so
+    no NaN reaches the gradient either)."""
+    span = end - start
+    zero = span == 0
+    return jnp.where(zero, 0.0, (t - start) / jnp.where(zero, 1.0, span))
 
 
 def needs_hermite(solver: diffrax.AbstractSolver) -> bool:

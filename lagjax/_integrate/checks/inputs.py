@@ -185,7 +185,8 @@ def check_tolerances(rtol: Any, atol: Any) -> None:
 
 
 def check_times(t0: Any, t1: Any, dt: Any) -> None:
-    """Finite real times; a finite, non-zero `dt` that does not ask for ≥ 10⁹ steps."""
+    """Finite real times, t1 ≠ t0; a finite, non-zero `dt` pointing from t0 to t1
+    that does not ask for ≥ 10⁹ steps. Traced times are not checked."""
     start, end = _concrete_scalar(t0, "t0"), _concrete_scalar(t1, "t1")
     step = None if dt is None else _concrete_scalar(dt, "dt")
     for name, value in (("t0", start), ("t1", end), ("dt", step)):
@@ -194,6 +195,8 @@ def check_times(t0: Any, t1: Any, dt: Any) -> None:
                 f"{name} = {value} is not a finite number; the times of a run must "
                 "be finite (a NaN often comes from a computed time: check it)"
             )
+    if start is not None and start == end:
+        raise ValueError(f"t1 must differ from t0, both are {start}")
     if step is None:
         return
     if step == 0:
@@ -203,6 +206,11 @@ def check_times(t0: Any, t1: Any, dt: Any) -> None:
         )
     if start is None or end is None:
         return
+    if (end - start) * step < 0:
+        raise ValueError(
+            f"dt = {step} points away from t1 = {end} (t0 = {start}); use dt of the "
+            "same sign as t1 - t0"
+        )
     steps = abs(end - start) / abs(step)
     if steps > MAX_FIXED_STEPS:
         raise ValueError(
