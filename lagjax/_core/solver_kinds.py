@@ -44,6 +44,28 @@ class AbstractConstraintKeeping(diffrax.AbstractSolver):
     after each step, or RATTLE)."""
 
 
+class AbstractTimeReversible(diffrax.AbstractSolver):
+    r"""A symmetric one-step method: $\Phi_{-h} = \Phi_h^{-1}$, so the state at
+    step k − 1 is recomputed from step k by a step of −h (exactly, up to
+    round-off).
+
+    The reversible adjoint (`lagjax.ReversibleAdjoint`) accepts exactly these
+    solvers. A method is symmetric when its coefficients are (a palindromic
+    splitting, a symmetric collocation method); a subclass whose symmetry depends
+    on its tables says so in `is_time_reversible`.
+
+    ??? cite "References"
+
+        - Hairer, Lubich & Wanner, *Geometric Numerical Integration*, 2nd ed.,
+          Springer (2006), §V.1 (symmetric methods), §V.2 (symmetric
+          Runge–Kutta methods), §V.3 (symmetric composition).
+    """
+
+    def is_time_reversible(self) -> bool:
+        """Whether this instance's step is symmetric (default: every instance)."""
+        return True
+
+
 class DefaultMethod(enum.Enum):
     """The method a system asks for when the caller names no solver."""
 

@@ -23,7 +23,10 @@ import optimistix as optx
 from jax.flatten_util import ravel_pytree
 from jaxtyping import Array
 
-from lagjax._core.solver_kinds import AbstractSymplecticRungeKutta
+from lagjax._core.solver_kinds import (
+    AbstractSymplecticRungeKutta,
+    AbstractTimeReversible,
+)
 from lagjax.solvers.compensated import compensated_add, zero_compensation
 from lagjax.solvers.stage_iteration import StageIteration
 
@@ -170,7 +173,9 @@ class _StageEquations(eqx.Module):
 
 
 class AbstractGaussLegendre(
-    AbstractSymplecticRungeKutta, diffrax.AbstractImplicitSolver[_SolverState]
+    AbstractSymplecticRungeKutta,
+    AbstractTimeReversible,
+    diffrax.AbstractImplicitSolver[_SolverState],
 ):
     r"""Engine shared by [`GaussLegendre`][] and [`ImplicitMidpoint`][].
 

@@ -70,6 +70,7 @@ import jax
 import jax.numpy as jnp
 from diffrax import RESULTS, LocalLinearInterpolation
 
+from lagjax._core.solver_kinds import AbstractTimeReversible
 from lagjax._core.terms import RigidBodyTerm, physical_step
 from lagjax.rigid.quaternion import quaternion_multiply
 from lagjax.solvers.compensated import add_to_state, zero_compensation
@@ -190,7 +191,9 @@ def _stage_table(weights, dtype):
     return jnp.asarray([weights, kicks[:-1], clocks], dtype=dtype).T, kicks[-1]
 
 
-class AbstractRigidBodySplitting(diffrax.AbstractSolver[_RigidState]):
+class AbstractRigidBodySplitting(
+    AbstractTimeReversible, diffrax.AbstractSolver[_RigidState]
+):
     r"""Kick–drift–kick Lie–Poisson splitting, composed with weights $\gamma_s$.
 
     One step of size h is $\prod_s \mathcal K_{\gamma_s h/2}\,

@@ -39,7 +39,10 @@ import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
 from lagjax._core.precision import newton_for
-from lagjax._core.solver_kinds import AbstractConstraintKeeping
+from lagjax._core.solver_kinds import (
+    AbstractConstraintKeeping,
+    AbstractTimeReversible,
+)
 from lagjax._core.system_protocols import LagrangianLike
 from lagjax._core.terms import RattleTerm, physical_step, unwrap_term
 from lagjax._linalg.in_step_root_find import root_find_in_step
@@ -97,7 +100,11 @@ def _raise_if_mass_varies(lagrangian, q0, t0, args, inverse_mass):
     )
 
 
-class Rattle(AbstractConstraintKeeping, diffrax.AbstractSolver[_RattleState]):
+class Rattle(
+    AbstractConstraintKeeping,
+    AbstractTimeReversible,
+    diffrax.AbstractSolver[_RattleState],
+):
     r"""RATTLE for holonomic constraints (order 2, symplectic, symmetric).
 
     Use it through `lj.simulate(Lagrangian(L, constraints=g), (q0, qdot0), dt=...,

@@ -53,7 +53,7 @@ from diffrax import (
     LocalLinearInterpolation,
 )
 
-from lagjax._core.solver_kinds import AbstractSplittingMethod
+from lagjax._core.solver_kinds import AbstractSplittingMethod, AbstractTimeReversible
 from lagjax.solvers.compensated import compensated_add, zero_compensation
 from lagjax.solvers.splitting_tables import (
     BLANES_MOAN4_DRIFTS,
@@ -88,7 +88,13 @@ def _add(x: Any, y: Any) -> Any:
     return jax.tree_util.tree_map(lambda a, b: a + b, x, y)
 
 
-class AbstractSplittingSolver(AbstractSplittingMethod, AbstractSolver[_SplittingState]):
+def _palindrome(table: tuple[float, ...]) -> bool:
+    return all(abs(a - b) <= 1e-15 for a, b in zip(table, reversed(table)))
+
+
+class AbstractSplittingSolver(
+    AbstractSplittingMethod, AbstractTimeReversible, AbstractSolver[_SplittingState]
+):
     r"""A kick–drift–…–kick splitting method for $H = T(p) + V(q)$.
 
     Subclasses set `kick_coefficients` $b_0..b_s$ and `drift_coefficients`
@@ -129,6 +135,13 @@ class AbstractSplittingSolver(AbstractSplittingMethod, AbstractSolver[_Splitting
 
     def order(self, terms: Any) -> int:
         return self.nominal_order
+
+    def is_time_reversible(self) -> bool:
+        """Symmetric when both coefficient tables are palindromes (HLW §V.3)."""
+        return all(
+            _palindrome(table)
+            for table in (self.kick_coefficients, self.drift_coefficients)
+        )
 
     def init(self, terms, t0, t1, y0, args) -> _SplittingState:
         _, term_p = terms

@@ -33,6 +33,7 @@ import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
 from lagjax._core.precision import newton_for
+from lagjax._core.solver_kinds import AbstractTimeReversible
 from lagjax._core.system_protocols import LagrangianLike
 from lagjax._core.terms import LagrangianTerm, physical_step
 from lagjax._linalg.in_step_root_find import root_find_in_step
@@ -55,7 +56,7 @@ def discrete_lagrangian(
 _State = Any
 
 
-class VariationalMidpoint(diffrax.AbstractSolver):
+class VariationalMidpoint(AbstractTimeReversible, diffrax.AbstractSolver):
     """The midpoint variational integrator (order 2, symplectic, symmetric).
 
     Use it through `lj.simulate(lagrangian, (q0, qdot0), dt=..., solver=
