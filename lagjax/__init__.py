@@ -18,6 +18,7 @@ from lagjax._core.terms import LagrangianTerm as LagrangianTerm
 from lagjax._core.terms import RattleTerm as RattleTerm
 from lagjax._core.terms import RigidBodyTerm as RigidBodyTerm
 from lagjax._integrate.checks.late_failure import SimulationError as SimulationError
+from lagjax._integrate.reversible_adjoint import ReversibleAdjoint as ReversibleAdjoint
 from lagjax._integrate.simulate import simulate as simulate
 from lagjax.action_principle import action as action
 from lagjax.action_principle import action_between as action_between

@@ -62,6 +62,10 @@ from lagjax._integrate.fixed_step_loop import (
     uniform_grid_saves,
 )
 from lagjax._integrate.flat_state import flattened
+from lagjax._integrate.reversible_adjoint import (
+    ReversibleAdjoint,
+    check_reversible_run,
+)
 from lagjax._integrate.scan_saving import ScanSaving, integrate_saving, scan_saving
 from lagjax._integrate.solver_choice import chosen_solver
 from lagjax._integrate.step_control import (
@@ -94,7 +98,7 @@ def simulate(
     progress: bool = False,
     *,
     saveat: diffrax.SaveAt | None = None,
-    adjoint: diffrax.AbstractAdjoint | None = None,
+    adjoint: diffrax.AbstractAdjoint | ReversibleAdjoint | None = None,
     throw: bool = True,
     dense: bool = False,
     event: diffrax.Event | None = None,
@@ -119,7 +123,10 @@ def simulate(
     - `max_steps`: default: the exact count for fixed steps, 10⁵ adaptive.
     - `progress`: show diffrax's text progress meter.
     - `adjoint`: diffrax adjoint; pass `diffrax.ForwardMode()` to use `jax.jvp` /
-      `jax.jacfwd` through the solve (reverse mode works with the default).
+      `jax.jacfwd` through the solve (reverse mode works with the default);
+      `lj.ReversibleAdjoint()` for reverse mode in constant memory through a
+      fixed-step run of a time-reversible solver
+      (`lagjax._integrate.reversible_adjoint`).
     - `dense`: keep the continuous extension: `traj.evaluate(t)` gives the state
       at any t of the span (`saveat=diffrax.SaveAt(dense=True)` does too).
       Fixed-step lagjax solvers get a Hermite extension of their order up to 4
@@ -170,6 +177,7 @@ def simulate(
                saveat, adjoint, throw and not late, dtype, dense, event,
                stepsize_controller, progress_meter)  # fmt: skip
     scan = run.fits_scan()
+    check_reversible_run(adjoint, solver, scan and run.saves_on_grid(), dt)
     trajectory = _compiled_run(
         system, y0, args, solver, _for_compiled_call(run, scan), scan
     )
@@ -285,7 +293,7 @@ class _Run(NamedTuple):
         event, and a saving the scans cover (`scan_saving`): the scan path."""
         plain = (
             self.dt is not None
-            and self.adjoint is None
+            and (self.adjoint is None or isinstance(self.adjoint, ReversibleAdjoint))
             and not self.progress
             and self.event is None
             and self.controller is None
@@ -329,6 +337,11 @@ def _integrate_scan(terms, solver, state0, args, run: _Run):
     """
     step = grid_step(run.t0, run.t1, run.dt, run.dtype)
     interpolation = None
+    fixed_steps, fixed_steps_saving = (
+        (run.adjoint.fixed_steps, run.adjoint.fixed_steps_saving)
+        if isinstance(run.adjoint, ReversibleAdjoint)
+        else (integrate_fixed_steps, integrate_fixed_steps_saving)
+    )
     if not run.saves_on_grid():
         plan = run.saving()
         assert plan is not None  # fits_scan() checked it
@@ -336,7 +349,7 @@ def _integrate_scan(terms, solver, state0, args, run: _Run):
             terms, solver, state0, args, plan, run.t0, run.t1, run.dtype
         )
     elif run.ts is None:
-        y1, result, steps = integrate_fixed_steps(
+        y1, result, steps = fixed_steps(
             terms, solver, run.t0, run.t1, step, state0, args, run.dtype
         )
         signed = math.copysign(abs(step), run.t1 - run.t0)
@@ -349,7 +362,7 @@ def _integrate_scan(terms, solver, state0, args, run: _Run):
         step = math.copysign(abs(step), run.t1 - run.t0)
         grid = run.save_grid()
         assert grid is not None  # fits_scan() checked it
-        ys, result, steps, saved = integrate_fixed_steps_saving(
+        ys, result, steps, saved = fixed_steps_saving(
             terms, solver, run.t0, step, grid, state0, args, run.dtype
         )
         saved_ts = jnp.where(saved, run.ts, jnp.inf)

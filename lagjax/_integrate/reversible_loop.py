@@ -1,0 +1,256 @@
+r"""Reverse mode through a fixed-step run without storing it: the states are
+recomputed backward by stepping with −h.
+
+A symmetric one-step method satisfies $\Phi_{-h} = \Phi_h^{-1}$ (Hairer, Lubich &
+Wanner §V.1), so from the final state $y_N$ the run can be walked back,
+$y_{k} = \Phi_{-h}(y_{k+1})$, and the cotangent pulled through one step at a time,
+
+$$\bar y_k = \Big(\frac{\partial \Phi_h}{\partial y}(y_k)\Big)^{\!\top} \bar y_{k+1},
+\qquad \bar\theta \mathrel{+}= \Big(\frac{\partial \Phi_h}{\partial \theta}(y_k)
+\Big)^{\!\top} \bar y_{k+1},$$
+
+each by `jax.vjp` of one step. Memory is that of the states kept at the *marks*:
+the final state, the saved states and optional checkpoints every K steps — never
+one per step. The reconstruction is exact up to round-off: each step back commits
+the round-off of one step, which accumulates like a forward run's (a random walk,
+∝ √steps); the marks restart it from the forward run's own states, so checkpoints
+bound it for very long runs or float32.
+
+What is carried from step to step is the solver's whole state beside y (the
+splittings' first-same-as-last force and Kahan compensation, the implicit
+methods' stage guess, RATTLE's multiplier), with its cotangent: a step back
+starts from the forward run's state at the mark and produces the state the
+forward step from $y_k$ starts from. A Kahan compensation started from the forward
+run's keeps the reconstruction compensated too (the true state is y + c either
+way), and it takes no part in the derivative: a compensated sum has the Jacobian
+of the plain one, its compensation's derivative is zero (exactly so in floating
+point, c̄ − c̄). The guesses of the implicit methods' stage solves are
+differentiated implicitly by optimistix (zero derivative), so a step back that
+starts its solve from a worse guess changes nothing but the iteration count.
+
+Marks are uniform: `lead` steps to mark 0, then `every` steps between marks.
+
+References: Gomez, Ren, Urtasun & Grosse, "The reversible residual network:
+backpropagation without storing activations", NeurIPS 2017; Hairer, Lubich &
+Wanner, *Geometric Numerical Integration*, 2nd ed. (2006), §V.1; diffrax issue
+#685 (reversible solves, not implemented there).
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from lagjax._integrate.scan_body import (
+    TrackingCarry,
+    all_finite,
+    fast_step_function,
+    step_times,
+    steps_per_trip,
+)
+
+
+class Clock(NamedTuple):
+    """The step grid: step k runs from t0 + k·dt to t0 + (k + 1)·dt, the step
+    `last_step` ending at t1 (a shortened last step), times in `dtype`."""
+
+    t0: float
+    dt: float
+    dtype: Any
+    last_step: int | None = None
+    t1: float | None = None
+
+    def times(self, k) -> tuple[Any, Any]:
+        return step_times(self.t0, self.dt, k, self.dtype, self.last_step, self.t1)
+
+    def first_times(self) -> tuple[Any, Any]:
+        """The times `solver.init` sees, as the plain scan gives them."""
+        start, end = self.t0, self.t0 + self.dt
+        return jnp.asarray(start, self.dtype), jnp.asarray(end, self.dtype)
+
+
+class Marks(NamedTuple):
+    """Where the forward run keeps its state: after `lead` steps, then every
+    `every` steps, `count` marks in all."""
+
+    lead: int
+    every: int
+    count: int
+
+
+def _stacked(first: Any, later: Any) -> Any:
+    return jax.tree_util.tree_map(
+        lambda a, b: jnp.concatenate([jnp.asarray(a)[None], b]), first, later
+    )
+
+
+def _forward(y0, terms, args, solver, clock: Clock, marks: Marks):
+    """The run: `(states, solver_states, results)` at the marks (stacked), with
+    the blocked loop's lean step body (`scan_body.fast_step_function`)."""
+    fast_step = fast_step_function(
+        terms, solver, clock.t0, clock.dt, args, clock.dtype, clock.last_step, clock.t1
+    )
+    state0 = solver.init(terms, *clock.first_times(), y0, args)
+    k0 = jnp.asarray(0)
+    carry = TrackingCarry(y0, state0, diffrax.RESULTS.successful, k0, None, k0)
+
+    def steps(carry, length):
+        unroll = steps_per_trip(solver)
+        return jax.lax.scan(fast_step, carry, None, length=length, unroll=unroll)[0]
+
+    if marks.lead:
+        carry = steps(carry, marks.lead)
+
+    def kept(carry: TrackingCarry):
+        return carry.y, carry.solver_state, carry.result
+
+    def interval(carry, _):
+        carry = steps(carry, marks.every)
+        return carry, kept(carry)
+
+    _, later = jax.lax.scan(interval, carry, None, length=marks.count - 1)
+    return _stacked(kept(carry), later)
+
+
+@eqx.filter_custom_vjp
+def reversible_run(differentiable, solver, clock: Clock, marks: Marks):
+    """`(states, results)` at the marks of a fixed-step run from `y0`;
+    `differentiable = (y0, terms, args)`. Reverse mode recomputes the states
+    backward (module docstring)."""
+    y0, terms, args = differentiable
+    states, _, results = _forward(y0, terms, args, solver, clock, marks)
+    return states, results
+
+
+@reversible_run.def_fwd
+def _reversible_run_fwd(perturbed, differentiable, solver, clock, marks):
+    del perturbed
+    y0, terms, args = differentiable
+    states, solver_states, results = _forward(y0, terms, args, solver, clock, marks)
+    return (states, results), (states, solver_states)
+
+
+@reversible_run.def_bwd
+def _reversible_run_bwd(residuals, cotangents, perturbed, differentiable, solver,
+                        clock, marks):  # fmt: skip
+    states, solver_states = residuals
+    state_cotangents = _dense_cotangents(cotangents[0], states)
+    y0, terms, args = differentiable
+    params, static = eqx.partition((terms, args), eqx.is_inexact_array)
+
+    def at(index, tree):
+        return jax.tree_util.tree_map(lambda x: x[index], tree)
+
+    carry = _Backward(
+        at(-1, state_cotangents),
+        _zeros(at(-1, solver_states)),
+        _zeros(params),
+    )
+
+    def interval(carry: _Backward, inputs):
+        y, state, mark_cotangent, mark = inputs
+        end = marks.lead + mark * marks.every
+        carry = _steps_back(carry, y, state, end, marks.every, params, static,
+                            solver, clock)  # fmt: skip
+        return carry._replace(y=_add(carry.y, mark_cotangent)), None
+
+    later = (
+        at(slice(1, None), states),
+        at(slice(1, None), solver_states),
+        at(slice(None, -1), state_cotangents),
+        jnp.arange(1, marks.count),
+    )
+    carry, _ = jax.lax.scan(interval, carry, later, reverse=True)
+    if marks.lead:
+        carry = _steps_back(carry, at(0, states), at(0, solver_states), marks.lead,
+                            marks.lead, params, static, solver, clock)  # fmt: skip
+    y0_cotangent, params_cotangent = _through_init(carry, y0, params, static, solver,
+                                                   clock)  # fmt: skip
+    gradient = (y0_cotangent, *params_cotangent)
+    return jax.tree_util.tree_map(
+        lambda g, p: g if p else None, gradient, perturbed, is_leaf=_is_none
+    )
+
+
+class _Backward(NamedTuple):
+    """What the backward pass carries: the cotangents of y and of the solver's
+    state at the current step, and the parameters' cotangent summed so far."""
+
+    y: Any
+    state: Any
+    params: Any
+
+
+def _steps_back(carry: _Backward, y, state, end, length, params, static, solver,
+                clock: Clock) -> _Backward:  # fmt: skip
+    """Walk back `length` steps from the state `(y, state)` after step `end` − 1,
+    pulling the cotangents through each step."""
+
+    def step(y, state, params, times):
+        terms, args = eqx.combine(params, static)
+        start, stop = times
+        y1, _, _, state1, _ = solver.step(terms, start, stop, y, args, state, False)
+        return y1, state1
+
+    def one_back(inner, _):
+        y, state, k, cotangent = inner
+        start, stop = clock.times(k - 1)
+        y, state = step(y, state, params, (stop, start))
+        _, pullback = jax.vjp(
+            lambda y, s, p: step(y, s, p, (start, stop)), y, state, params
+        )
+        y_bar, state_bar, params_bar = pullback((cotangent.y, cotangent.state))
+        cotangent = _Backward(y_bar, state_bar, _add(cotangent.params, params_bar))
+        return (y, state, k - 1, cotangent), None
+
+    inner = (y, state, jnp.asarray(end), carry)
+    (_, _, _, carry), _ = jax.lax.scan(one_back, inner, None, length=length)
+    return carry
+
+
+def _through_init(carry: _Backward, y0, params, static, solver, clock: Clock):
+    """The cotangents of y0 and the parameters, with the solver state's cotangent
+    pulled through `solver.init` (the first force of a splitting, say)."""
+
+    def init(y0, params):
+        terms, args = eqx.combine(params, static)
+        return solver.init(terms, *clock.first_times(), y0, args)
+
+    _, pullback = jax.vjp(init, y0, params)
+    y0_bar, params_bar = pullback(carry.state)
+    return _add(carry.y, y0_bar), _add(carry.params, params_bar)
+
+
+def _is_none(x: Any) -> bool:
+    return x is None
+
+
+def _add(a: Any, b: Any) -> Any:
+    return jax.tree_util.tree_map(lambda x, y: x + y, a, b)
+
+
+def _zeros(tree: Any) -> Any:
+    return jax.tree_util.tree_map(jnp.zeros_like, tree)
+
+
+def _dense_cotangents(cotangents: Any, states: Any) -> Any:
+    """The states' cotangents with zeros where none came (an unused output)."""
+    if cotangents is None:
+        return _zeros(states)
+    return jax.tree_util.tree_map(
+        lambda c, s: jnp.zeros_like(s) if c is None else c,
+        cotangents,
+        states,
+        is_leaf=_is_none,
+    )
+
+
+def finite_marks(states: Any, results: Any) -> jax.Array:
+    """Which marks the run reached without failing: the solver's result at each
+    and a finite state up to it."""
+    good = (results == diffrax.RESULTS.successful) & jax.vmap(all_finite)(states)
+    return jnp.cumprod(good.astype(jnp.int32)).astype(bool)
