@@ -192,10 +192,17 @@ def _damped_newton(merit, residual, start: jax.Array) -> jax.Array:
         gradient = residual(x, None)
         direction, _ = solve_dense_in_step(jax.jacfwd(residual)(x, None), gradient)
         slope, value = jnp.dot(gradient, direction), merit(x)
+        # Within Newton's quadratic range, φ's decrease (~|step|²) falls below φ's
+        # round-off and Armijo's test fails at every length: without this, each
+        # iteration then halved ~20 times for no progress and ran all
+        # `_DAMPED_ITERATIONS` (relativistic particle, GaussLegendre(3), 30 steps:
+        # 8 s → not done after 15 min). There a full step is trusted if finite.
+        near = jnp.max(jnp.abs(direction)) <= _step_tolerance(x)
 
         def rejected(length):
             trial = merit(x - length * direction)
-            good = jnp.isfinite(trial) & (trial <= value - 1e-4 * length * slope)
+            decreased = trial <= value - 1e-4 * length * slope
+            good = jnp.isfinite(trial) & (decreased | near)
             return ~good & (length > _SMALLEST_DAMPING)
 
         length = jax.lax.while_loop(rejected, lambda a: 0.5 * a, jnp.ones((), dtype))
