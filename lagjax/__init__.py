@@ -80,6 +80,7 @@ from lagjax.solvers.splitting import Yoshida4 as Yoshida4
 from lagjax.solvers.splitting import Yoshida6 as Yoshida6
 from lagjax.solvers.variational import VariationalMidpoint as VariationalMidpoint
 from lagjax.sweep import sweep as sweep
+from lagjax.taylor.solver import Taylor as Taylor
 from lagjax.trajectory import Trajectory as Trajectory
 
 try:  # one source for the version: pyproject.toml, through the installed metadata

@@ -75,9 +75,11 @@ from lagjax._integrate.step_control import (
     stepping,
     with_implicit_tolerances,
 )
+from lagjax._integrate.taylor_run import run_taylor
 from lagjax._integrate.time_grid import grid_step
 from lagjax.solvers.hermite import HermiteDenseOutput, needs_hermite
 from lagjax.solvers.implicit import stage_failure_message
+from lagjax.taylor.solver import Taylor
 from lagjax.trajectory import Trajectory
 
 System = AbstractSystem
@@ -150,6 +152,12 @@ def simulate(
       (`lagjax._integrate.checks.run_verdict`) is a failure too: `RESULTS.nonlinear_divergence`, and
       `stats["energy_drift"]` holds the measured ratio.
     """
+    if isinstance(solver, Taylor):  # Taylor series of the derived equations
+        return run_taylor(system, y0, t0, t1, dt, solver, ts, args, rtol, atol,
+                          max_steps, throw, saveat=saveat, adjoint=adjoint,
+                          dense=dense, event=event, progress=progress,
+                          stepsize_controller=stepsize_controller,
+                          progress_meter=progress_meter)  # fmt: skip
     t1, dt = defaults(system, t0, t1, dt, solver, stepsize_controller)
     y0 = check_simulate_inputs(system, y0, t0, t1, dt, solver, ts, args, max_steps)
     if progress and progress_meter is not None:

@@ -29,10 +29,11 @@ from collections import Counter
 from typing import Any, NamedTuple
 
 import jax
+import numpy as np
 import jax.extend as jex
 import jax.numpy as jnp
 
-from . import recurrences as rec
+import lagjax.taylor.recurrences as rec
 
 CALLS = frozenset(
     {"pjit", "jit", "closed_call", "core_call", "remat", "checkpoint"}
@@ -142,7 +143,9 @@ class _Builder:
 
 def _literal_is(builder: _Builder, index: int, value: float) -> bool:
     const = builder.constants.get(index)
-    return const is not None and const.shape == () and bool(const == value)
+    return (
+        const is not None and np.shape(const) == () and bool(np.asarray(const) == value)
+    )
 
 
 def _integer_power(builder: _Builder, x: int, n: int, aval: Any) -> int:

@@ -15,6 +15,7 @@ from typing import Any
 
 import diffrax
 import equinox as eqx
+import jax
 import numpy as np
 
 from lagjax._integrate.checks.run_verdict import DIVERGENCE_MESSAGE, NON_FINITE_MESSAGE
@@ -29,9 +30,14 @@ class SimulationError(eqx.EquinoxRuntimeError):
 
 
 def _max_steps_message(trajectory: Any, max_steps: Any, rtol: float) -> str:
-    reached = np.asarray(trajectory.ts)
-    reached = reached[np.isfinite(reached)]
-    where = f" at t = {reached[-1]:.6g}" if reached.size else ""
+    # the last save with a state: unused slots are t = inf (diffrax) or NaN states
+    states = np.concatenate(
+        [np.asarray(x).reshape(len(np.asarray(trajectory.ts)), -1)
+         for x in jax.tree_util.tree_leaves(trajectory.ys)], axis=1,
+    )  # fmt: skip
+    times = np.asarray(trajectory.ts)
+    kept = np.isfinite(times) & np.all(np.isfinite(states), axis=1)
+    where = f" (last saved state at t = {times[kept][-1]:.6g})" if kept.any() else ""
     solver = trajectory.stats.get("solver", "the solver")
     advice = (
         "raise max_steps (simulate(..., max_steps=N)), loosen rtol/atol, or use a "

@@ -1,0 +1,173 @@
+"""`simulate` with `lj.Taylor`: Taylor-series integration of a system's derived
+equations, by JAX or by heyoka.
+
+The system's rates in the caller's convention (`AbstractSystem.state_rate`: (q̇, q̈)
+for a Lagrangian, Hamilton's equations for a Hamiltonian) on the flat state
+y = (q, q̇) or (q, p) are the vector field; its jaxpr of elementary operations is
+what both routes work from:
+
+- `backend="jax"` (`lagjax.taylor.taylor_integrate`): the Taylor coefficients by
+  the recurrences of each primitive, order and step from the tolerance, the saves
+  from the step polynomial; under `jit`, `vmap` and `grad`.
+- `backend="heyoka"` (`lagjax.taylor.heyoka_backend`): the jaxpr translated into
+  heyoka's expressions (the parameters as heyoka parameters, so new `args` do not
+  recompile) and integrated by heyoka's LLVM-compiled Taylor method; concrete
+  values only (a traced call is refused by name), the fastest on one CPU.
+
+The tolerances are the Taylor object's when it sets them, else `simulate`'s.
+References: Jorba & Zou, *Experimental Mathematics* 14 (2005); Biscani & Izzo,
+*MNRAS* 504 (2021).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.flatten_util import ravel_pytree
+
+from lagjax._core.precision import cast_floats, working_dtype
+from lagjax._core.system import AbstractSystem
+from lagjax._integrate.checks.inputs import check_simulate_inputs
+from lagjax._integrate.checks.late_failure import raise_if_failed
+from lagjax.taylor.heyoka_backend import heyoka_integrate
+from lagjax.taylor.integrate import RESULTS as TAYLOR_RESULTS
+from lagjax.taylor.integrate import taylor_integrate
+from lagjax.taylor.solver import Taylor
+from lagjax.trajectory import Trajectory
+
+_HEYOKA_RESULTS = {
+    "time_limit": diffrax.RESULTS.successful,
+    "step_limit": diffrax.RESULTS.max_steps_reached,
+    "err_nf_state": diffrax.RESULTS.nonfinite,
+}
+
+
+def run_taylor(
+    system: Any, y0: Any, t0: Any, t1: Any, dt: Any, solver: Taylor, ts: Any,
+    args: Any, rtol: float, atol: float, max_steps: int | None, throw: bool,
+    **options: Any,
+) -> Trajectory:  # fmt: skip
+    """`simulate` for a `Taylor` solver: the checks, the run, the verdict."""
+    refuse_taylor_options(dt=dt, **options)
+    if t1 is None and isinstance(system, AbstractSystem):
+        t1 = system.default_span()[0]
+    y0 = check_simulate_inputs(system, y0, t0, t1, None, None, ts, args, max_steps)
+    system, args = system.resolve(args)
+    if system.keeps_constraints():
+        raise ValueError(
+            "lj.Taylor integrates the equations of motion and does not keep "
+            "constraints; use Rattle (holonomic) or a diffrax solver, which simulate "
+            "projects onto the constraints"
+        )
+    dtype = working_dtype(y0)
+    system.check_start(y0, t0, args, dtype)
+    y0, args = cast_floats(y0, dtype), cast_floats(args, dtype)
+    save_ts = None if ts is None else jnp.asarray(ts, dtype=dtype)
+    trajectory = simulate_taylor(
+        system, y0, t0, t1, save_ts, args, solver,
+        rtol=rtol, atol=atol, max_steps=max_steps,
+    )  # fmt: skip
+    if throw:
+        if any(
+            isinstance(x, jax.core.Tracer)
+            for x in jax.tree_util.tree_leaves((trajectory.ts, trajectory.ys))
+        ):
+            trajectory = eqx.error_if(
+                trajectory, trajectory.result != diffrax.RESULTS.successful,
+                "lj.Taylor did not reach t1: raise max_steps, or see traj.result "
+                "with throw=False",
+            )  # fmt: skip
+        else:
+            raise_if_failed(trajectory, trajectory.stats["max_steps"], rtol)
+    return trajectory
+
+
+def refuse_taylor_options(**options: Any) -> None:
+    """Options `simulate` has that a Taylor run does not support, refused by name."""
+    given = [name for name, value in options.items() if value not in (None, False)]
+    if given:
+        raise ValueError(
+            f"lj.Taylor does not support {', '.join(given)} yet: save at given "
+            "times with ts=..., or use a diffrax solver (diffrax.Dopri8()) for "
+            "events, dense output, step-size controllers and custom adjoints"
+        )
+
+
+def flat_vector_field(system: AbstractSystem, y0: Any):
+    """`(field, flat0, unravel)`: y' = field(t, y, args) on the flat state."""
+    flat0, unravel = ravel_pytree(tuple(y0))
+
+    def field(t, y, args):
+        q, second = unravel(y)
+        rate = system.state_rate(q, second, t, args)
+        return ravel_pytree(rate)[0].astype(y.dtype)
+
+    return field, flat0, unravel
+
+
+def simulate_taylor(
+    system: AbstractSystem,
+    y0: Any,
+    t0: float,
+    t1: float,
+    ts: Any,
+    args: Any,
+    solver: Taylor,
+    *,
+    rtol: float,
+    atol: float,
+    max_steps: int | None,
+) -> Trajectory:
+    """The run of `simulate(system, y0, solver=lj.Taylor(...))` (module docstring);
+    failures are reported in `result` (the caller raises)."""
+    field, flat0, unravel = flat_vector_field(system, y0)
+    rtol = rtol if solver.rtol is None else solver.rtol
+    atol = atol if solver.atol is None else solver.atol
+    steps = max_steps or solver.max_steps
+    if solver.backend == "heyoka":
+        solution = heyoka_integrate(
+            field, np.asarray(flat0), float(t0), float(t1), ts=ts, args=args,
+            rtol=rtol, atol=atol, max_steps=steps, throw=False,
+        )  # fmt: skip
+        saved_ts, flat_ys = jnp.asarray(solution.ts), jnp.asarray(solution.ys)
+        result = _HEYOKA_RESULTS.get(str(solution.status).split(".")[-1])
+        result = diffrax.RESULTS.internal_error if result is None else result
+        num_steps = jnp.asarray(solution.num_steps)
+    else:
+        solution = taylor_integrate(
+            field, flat0, t0, t1, ts=ts, args=args, rtol=rtol, atol=atol,
+            order=solver.order, max_steps=steps, forward_mode=solver.forward_mode,
+        )  # fmt: skip
+        saved_ts, flat_ys, num_steps = solution.ts, solution.ys, solution.num_steps
+        result = _as_diffrax_result(solution.result)
+    ys = jax.vmap(unravel)(flat_ys)
+    stats = {
+        "num_steps": num_steps,
+        "num_accepted_steps": num_steps,
+        "num_rejected_steps": 0 * num_steps,
+        "max_steps": jnp.asarray(steps),
+        "finite": jnp.all(jnp.isfinite(flat_ys)),
+    }
+    return Trajectory(
+        ts=saved_ts, ys=ys, system=system, args=args, run_stats=stats,
+        result=result, solver_name=f"Taylor[{solver.backend}]",
+    )  # fmt: skip
+
+
+def _as_diffrax_result(result: Any) -> Any:
+    """The Taylor integrator's codes are diffrax's plus `non_finite`."""
+    finite = result != TAYLOR_RESULTS.non_finite
+    return diffrax.RESULTS.where(
+        finite,
+        diffrax.RESULTS.where(
+            result == TAYLOR_RESULTS.successful,
+            diffrax.RESULTS.successful,
+            diffrax.RESULTS.max_steps_reached,
+        ),
+        diffrax.RESULTS.nonfinite,
+    )
