@@ -29,9 +29,9 @@ from collections import Counter
 from typing import Any, NamedTuple
 
 import jax
-import numpy as np
 import jax.extend as jex
 import jax.numpy as jnp
+import numpy as np
 
 import lagjax.taylor.recurrences as rec
 
