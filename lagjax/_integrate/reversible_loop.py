@@ -208,7 +208,12 @@ def _steps_back(carry: _Backward, y, state, end, length, params, static, solver,
         return (y, state, k - 1, cotangent), None
 
     inner = (y, state, jnp.asarray(end), carry)
-    (_, _, _, carry), _ = jax.lax.scan(one_back, inner, None, length=length)
+    # Unrolled as the forward loop is (`steps_per_trip`): Störmer–Verlet's short
+    # step pays the loop's own cost per trip, not per step.
+    unroll = steps_per_trip(solver)
+    (_, _, _, carry), _ = jax.lax.scan(
+        one_back, inner, None, length=length, unroll=unroll
+    )
     return carry
 
 
