@@ -10,6 +10,7 @@ import diffrax
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import lagjax as lj
 from lagjax.mechanics.legendre import invert_gradient
@@ -64,3 +65,66 @@ def test_relativistic_particle_gauss_legendre_3_returns_the_closed_form():
     np.testing.assert_allclose(
         trajectory.q[-1], relativistic_closed_form(0.3, 1.2), rtol=1e-12
     )
+
+
+# -- Declared structure, checked -------------------------------------------------
+
+
+def relativistic_kinetic(p):
+    return jnp.sqrt(1 + p**2)
+
+
+def half_square(q):
+    return 0.5 * q**2
+
+
+def test_separable_relativistic_kinetic_is_not_taken_for_quadratic():
+    # H = √(1 + p²) + q²/2: q̈ = −q (1 − q̇²)^{3/2} = −0.1536 at (0.3, 0.6).
+    system = lj.SeparableHamiltonian(relativistic_kinetic, half_square)
+    acceleration = system.to_lagrangian().acceleration(0.3, 0.6)
+    np.testing.assert_allclose(acceleration, -0.3 * 0.64**1.5, rtol=1e-12)
+
+
+def test_nystrom_splitting_refuses_a_relativistic_kinetic_energy():
+    system = lj.SeparableHamiltonian(relativistic_kinetic, half_square)
+    with pytest.raises(ValueError, match=r"Nyström.*not quadratic.*BlanesMoan6"):
+        lj.simulate(system, (0.3, 0.6), t1=1.0, dt=0.1,
+                    solver=lj.BlanesMoanNystrom6())  # fmt: skip
+
+
+def test_nystrom_splitting_keeps_a_quadratic_kinetic_energy_undeclared():
+    # T = p²/2 is read off its program: the oscillator's closed form cos t.
+    system = lj.SeparableHamiltonian(half_square, half_square)
+    trajectory = lj.simulate(system, (1.0, 0.0), t1=1.0, dt=0.05,
+                             solver=lj.BlanesMoanNystrom6())  # fmt: skip
+    np.testing.assert_allclose(trajectory.q[-1], np.cos(1.0), rtol=1e-9)
+
+
+def relativistic_oscillator(q, qd):
+    return -jnp.sqrt(1 - qd**2) - 0.5 * q**2
+
+
+def test_declared_quadratic_in_velocity_is_verified():
+    lagrangian = lj.Lagrangian(relativistic_oscillator, quadratic_in_velocity=True)
+    with pytest.raises(ValueError, match=r"quadratic_in_velocity=True.*Drop"):
+        lj.simulate(lagrangian, (1.0, 0.0), t1=3.0, dt=0.01)
+
+
+def test_declared_quadratic_in_momentum_is_verified():
+    hamiltonian = lj.Hamiltonian(
+        lambda q, p: jnp.sqrt(1 + p**2) + 0.5 * q**2, quadratic_in_momentum=True
+    )
+    with pytest.raises(ValueError, match=r"quadratic_in_momentum=True.*Drop"):
+        lj.simulate(hamiltonian, (1.0, 0.0), t1=1.0, dt=0.01)
+
+
+def test_true_quadratic_declaration_is_accepted():
+    # A mass matrix the program cannot prove quadratic (a solve), declared: runs.
+    def kinetic(q, qd):
+        mass = jnp.array([[2.0, 0.5], [0.5, 1.0]])
+        return 0.5 * qd @ jnp.linalg.solve(jnp.linalg.inv(mass), qd) - 0.5 * q @ q
+
+    lagrangian = lj.Lagrangian(kinetic, quadratic_in_velocity=True)
+    y0 = (jnp.array([1.0, 0.0]), jnp.array([0.0, 0.3]))
+    trajectory = lj.simulate(lagrangian, y0, t1=0.5, dt=0.05)
+    assert trajectory.result == diffrax.RESULTS.successful

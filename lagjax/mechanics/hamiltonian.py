@@ -25,7 +25,9 @@ from typing import Any
 import diffrax
 import equinox as eqx
 import jax
+from jax.flatten_util import ravel_pytree
 
+from lagjax._core.precision import cast_floats
 from lagjax._core.solver_kinds import (
     AbstractSplittingMethod,
     DefaultMethod,
@@ -36,9 +38,14 @@ from lagjax._linalg.small_gradient import small_gradient
 from lagjax.mechanics.abstract_hamiltonian import (
     AbstractHamiltonian as AbstractHamiltonian,
 )
+from lagjax.mechanics.declared_structure import check_declared_quadratic
 from lagjax.mechanics.functions import as_system_function
 from lagjax.mechanics.lagrangian import Lagrangian
-from lagjax.mechanics.legendre import invert_gradient, tree_dot
+from lagjax.mechanics.legendre import (
+    invert_gradient,
+    is_at_most_quadratic,
+    tree_dot,
+)
 from lagjax.mechanics.legendre_hamiltonian import (
     LegendreHamiltonian as LegendreHamiltonian,
 )
@@ -53,6 +60,21 @@ from lagjax.mechanics.signature import (
 class AbstractUserHamiltonian(AbstractHamiltonian):
     """A Hamiltonian the user wrote (not a Legendre transform): its Lagrangian is
     the Legendre dual L = p·q̇ − H."""
+
+    def check_start(self, y0: Any, t0: Any, args: Any, dtype: Any) -> None:
+        """A declared `quadratic_in_momentum` must hold at the start (concrete
+        values in the run's `dtype`, before the run)."""
+        if not self.quadratic_in_momentum:
+            return
+        q0, p0 = cast_floats(tuple(y0), dtype)
+        check_declared_quadratic(
+            lambda fixed, p: self(fixed[0], p, *fixed[1:]),
+            (q0, t0, cast_floats(args, dtype)),
+            p0,
+            key=self,
+            flag="quadratic_in_momentum",
+            what=f"the {type(self).__name__}'s H as a function of p",
+        )
 
     def to_lagrangian(self) -> Lagrangian:
         """The Legendre-transformed Lagrangian L(q, q̇, t) = p·q̇ − H."""
@@ -87,8 +109,11 @@ class Hamiltonian(AbstractUserHamiltonian):
 class SeparableHamiltonian(AbstractUserHamiltonian):
     """H = T(p) + V(q), with `T(p[, t[, args]])` and `V(q[, t[, args]])`.
 
-    `quadratic_in_momentum` defaults to True (T = ½pᵀM⁻¹p is the usual case); set it
-    to False for a non-quadratic kinetic energy such as the relativistic one.
+    `quadratic_in_momentum=True` declares T quadratic in p (T = ½pᵀM⁻¹p); it is
+    verified at the start of a run. Left False (the default), a T whose program is
+    quadratic (`p @ p / (2 * m)`) is found so by reading it; a relativistic T is
+    not, and the Runge–Kutta–Nyström splittings, which need a quadratic T to keep
+    their order, are then refused.
     """
 
     kinetic: Callable = eqx.field(converter=as_system_function)
@@ -97,7 +122,9 @@ class SeparableHamiltonian(AbstractUserHamiltonian):
     potential_arity: int = eqx.field(static=True)
     quadratic_in_momentum: bool = eqx.field(static=True)
 
-    def __init__(self, T: Callable, V: Callable, *, quadratic_in_momentum: bool = True):
+    def __init__(
+        self, T: Callable, V: Callable, *, quadratic_in_momentum: bool = False
+    ):
         self.kinetic = T
         self.kinetic_arity = positional_arity(
             T, minimum=1, maximum=3, what="the kinetic energy T"
@@ -120,18 +147,29 @@ class SeparableHamiltonian(AbstractUserHamiltonian):
         nystrom = isinstance(solver, AbstractSplittingMethod) and (
             solver.needs_quadratic_kinetic
         )
-        if nystrom and not self.quadratic_in_momentum:
+        if nystrom and not self._kinetic_is_quadratic(y0[1], t0, args):
             raise ValueError(
                 f"{type(solver).__name__} is a Runge–Kutta–Nyström method: it keeps "
                 "its order only for a kinetic energy quadratic in p, and this "
-                "SeparableHamiltonian has quadratic_in_momentum=False. Use "
-                "BlanesMoan6 or another splitting method."
+                "SeparableHamiltonian's T is not quadratic as written (a "
+                "relativistic T, say). Use BlanesMoan6 or another splitting "
+                "method; if T is quadratic, declare quadratic_in_momentum=True "
+                "(checked at the start of the run)."
             )
         terms = (
             diffrax.ODETerm(SeparableDrift(self)),
             diffrax.ODETerm(SeparableKick(self)),
         )
         return terms, y0, self
+
+    def _kinetic_is_quadratic(self, p0: Any, t0: Any, args: Any) -> bool:
+        """Declared (and verified in `check_start`), or proven from T's program."""
+        if self.quadratic_in_momentum:
+            return True
+        flat, unravel = ravel_pytree(p0)
+        return is_at_most_quadratic(
+            lambda p: self.kinetic_energy(unravel(p), t0, args), flat
+        )
 
     def kinetic_energy(self, p: Any, t: Any = 0.0, args: Any = None) -> jax.Array:
         value = call_with_arity(self.kinetic, self.kinetic_arity, p, t, args)

@@ -43,6 +43,7 @@ from lagjax.mechanics.constraints import (
     constrained_motion,
     refuse_start_off_constraints,
 )
+from lagjax.mechanics.declared_structure import check_declared_quadratic
 from lagjax.mechanics.euler_lagrange import euler_lagrange_acceleration
 from lagjax.mechanics.functions import as_system_function
 from lagjax.mechanics.legendre import tree_dot
@@ -282,15 +283,25 @@ class Lagrangian(AbstractSystem):
         return () if self.constraints is None else (RattleTerm,)
 
     def check_start(self, y0: Any, t0: Any, args: Any, dtype: Any) -> None:
-        """A constrained Lagrangian's start must lie on its constraints.
+        """A declared `quadratic_in_velocity` must hold at the start, and a
+        constrained Lagrangian's start must lie on its constraints.
 
         Checked before the run, on concrete values in the run's `dtype`: the
         compiled run sees traced values and could only attach the error at run
         time, without the residuals in the message.
         """
+        q0, qdot0 = cast_floats(tuple(y0), dtype)
+        if self.quadratic_in_velocity:
+            check_declared_quadratic(
+                lambda fixed, v: self(fixed[0], v, *fixed[1:]),
+                (q0, t0, cast_floats(args, dtype)),
+                qdot0,
+                key=self.function,
+                flag="quadratic_in_velocity",
+                what="L as a function of q̇",
+            )
         if self.constraints is None:
             return
-        q0, qdot0 = cast_floats(tuple(y0), dtype)
         constraints = cast_floats(self.constraints, dtype)
         refuse_start_off_constraints(
             constraints, q0, qdot0, t0, cast_floats(args, dtype)

@@ -278,7 +278,7 @@ def _equation_degrees(eqn: Any, degrees: list[int]) -> list[int]:
         closed = eqn.params.get("jaxpr", eqn.params.get("call_jaxpr"))
         if closed is not None:
             inner = getattr(closed, "jaxpr", closed)
-            return _jaxpr_degrees(inner, degrees)
+            return jaxpr_degrees(inner, degrees)
     rounds = name == "convert_element_type" and not jnp.issubdtype(
         eqn.params["new_dtype"], jnp.inexact
     )  # a cast to an integer truncates: not a polynomial
@@ -300,7 +300,8 @@ def _equation_degrees(eqn: Any, degrees: list[int]) -> list[int]:
     return [0 if max(degrees, default=0) == 0 else _UNBOUNDED] * count
 
 
-def _jaxpr_degrees(jaxpr: Any, input_degrees: list[int]) -> list[int]:
+def jaxpr_degrees(jaxpr: Any, input_degrees: list[int]) -> list[int]:
+    """Bounds on the polynomial degree of each output, given the inputs'."""
     env = dict(zip(jaxpr.invars, input_degrees))
 
     def degree(atom):
@@ -321,5 +322,5 @@ def is_at_most_quadratic(function: Callable[[jax.Array], jax.Array], x: Any) -> 
     same result for a quadratic function, only slower.
     """
     closed = jax.make_jaxpr(function)(x)
-    (degree,) = _jaxpr_degrees(closed.jaxpr, [1] * len(closed.jaxpr.invars))
+    (degree,) = jaxpr_degrees(closed.jaxpr, [1] * len(closed.jaxpr.invars))
     return degree <= 2
