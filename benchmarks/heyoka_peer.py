@@ -6,7 +6,9 @@ itself (`heyoka.lagrangian`) and integrated by `taylor_adaptive` /
 `taylor_adaptive_batch`; **lagjax→heyoka** — the equations derived by lagjax
 (`lj.Lagrangian(L).acceleration`), their jaxpr translated into heyoka's expressions
 (`heyoka_integrate`); **lagjax Dopri8** — `lj.simulate` with `diffrax.Dopri8` at
-rtol = atol = 1e-14, jitted. Cases (issue 28), unit masses and rods, g = 9.81:
+rtol = atol = 1e-14, jitted; and **simulate(Taylor heyoka)** — what a user writes,
+`lj.simulate(lag, y0, solver=lj.Taylor(backend="heyoka"))`, checks and all. Cases,
+unit masses and rods, g = 9.81:
 
 (a) the double pendulum from θ = (0.5, 0.3), q̇ = 0, to t = 100; heyoka at tol 1e-12
     and 1e-15; the error is the largest difference of the final state from heyoka
@@ -153,7 +155,14 @@ def heyoka_rows(case: str, chain: Chain, y0, t1: float, tol: float, exact,
     def backend():
         return heyoka_integrate(chain.vector_field, y0, 0.0, t1, tol=tol).ys[-1]
 
+    def simulate_taylor():
+        n = chain.n
+        run = lj.simulate(chain.lagrangian, (y0[:n], y0[n:]), t1=t1, rtol=tol,
+                          atol=tol, solver=lj.Taylor(backend="heyoka"))  # fmt: skip
+        return np.concatenate([run.q[-1], run.qdot[-1]])
+
     first_s, _ = timed(backend)
+    simulate_first_s, _ = timed(simulate_taylor)
     return [
         row(
             case,
@@ -164,6 +173,9 @@ def heyoka_rows(case: str, chain: Chain, y0, t1: float, tol: float, exact,
             exact,
         ),
         row(case, "lagjax->heyoka", tol, first_s, backend, exact),
+        # what a user writes: lj.simulate(lag, y0, solver=lj.Taylor(backend="heyoka"))
+        row(case, "simulate(Taylor heyoka)", tol, simulate_first_s, simulate_taylor,
+            exact),  # fmt: skip
     ]
 
 

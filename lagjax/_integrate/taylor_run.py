@@ -21,6 +21,7 @@ References: Jorba & Zou, *Experimental Mathematics* 14 (2005); Biscani & Izzo,
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from typing import Any
 
 import diffrax
@@ -66,8 +67,12 @@ def run_taylor(
         )
     dtype = working_dtype(y0)
     system.check_start(y0, t0, args, dtype)
-    y0, args = cast_floats(y0, dtype), cast_floats(args, dtype)
-    save_ts = None if ts is None else jnp.asarray(ts, dtype=dtype)
+    if solver.backend == "heyoka":  # NumPy in, NumPy out: no eager JAX dispatch
+        y0 = jax.tree_util.tree_map(lambda x: np.asarray(x, dtype=dtype), tuple(y0))
+        save_ts = None if ts is None else np.asarray(ts, dtype=dtype)
+    else:
+        y0, args = cast_floats(y0, dtype), cast_floats(args, dtype)
+        save_ts = None if ts is None else jnp.asarray(ts, dtype=dtype)
     trajectory = simulate_taylor(
         system, y0, t0, t1, save_ts, args, solver,
         rtol=rtol, atol=atol, max_steps=max_steps,
@@ -82,9 +87,17 @@ def run_taylor(
                 "lj.Taylor did not reach t1: raise max_steps, or see traj.result "
                 "with throw=False",
             )  # fmt: skip
-        else:
+        elif not _succeeded(trajectory):
             raise_if_failed(trajectory, trajectory.stats["max_steps"], rtol)
     return trajectory
+
+
+def _succeeded(trajectory: Trajectory) -> bool:
+    """Whether a concrete run succeeded (heyoka says so in its status)."""
+    status = trajectory.run_stats.get("heyoka_status")
+    if status is not None:
+        return status == "time_limit"
+    return bool(trajectory.result == diffrax.RESULTS.successful)
 
 
 def refuse_taylor_options(**options: Any) -> None:
@@ -98,16 +111,63 @@ def refuse_taylor_options(**options: Any) -> None:
         )
 
 
-def flat_vector_field(system: AbstractSystem, y0: Any):
-    """`(field, flat0, unravel)`: y' = field(t, y, args) on the flat state."""
-    flat0, unravel = ravel_pytree(tuple(y0))
+class FlatVectorField(eqx.Module):
+    """y' = field(t, y, args) on the flat state y = ravel((q, second)).
 
-    def field(t, y, args):
-        q, second = unravel(y)
-        rate = system.state_rate(q, second, t, args)
+    A Module, not a closure: two fields of equal systems and state layouts compare
+    equal and hash alike, so the heyoka backend's translation cache (keyed by the
+    function) and JAX's compilation caches are hit on every later call.
+    """
+
+    system: AbstractSystem
+    layout: tuple = eqx.field(static=True)  # (treedef, shapes, dtypes) of (q, second)
+
+    def unravel(self, y: jax.Array) -> Any:
+        treedef, shapes, _ = self.layout
+        sizes = [int(np.prod(shape)) for shape in shapes]
+        pieces = jnp.split(y, np.cumsum(sizes)[:-1])
+        leaves = [piece.reshape(shape) for piece, shape in zip(pieces, shapes)]
+        return jax.tree_util.tree_unflatten(treedef, leaves)
+
+    def __call__(self, t: Any, y: jax.Array, args: Any) -> jax.Array:
+        q, second = self.unravel(y)
+        rate = self.system.state_rate(q, second, t, args)
         return ravel_pytree(rate)[0].astype(y.dtype)
 
-    return field, flat0, unravel
+
+_FIELDS: OrderedDict[Any, FlatVectorField] = OrderedDict()
+
+
+def _one_field_per_system(system: AbstractSystem, layout: tuple) -> FlatVectorField:
+    """The same field object for the same system and layout: the caches keyed by
+    it (heyoka's translations) then match by identity, not by comparing systems
+    leaf by leaf (milliseconds per call)."""
+    try:
+        key = (system, layout)
+        field = _FIELDS.get(key)
+    except TypeError:  # a system with array leaves does not hash
+        return FlatVectorField(system, layout)
+    if field is None:
+        field = _FIELDS[key] = FlatVectorField(system, layout)
+        while len(_FIELDS) > 64:
+            _FIELDS.popitem(last=False)
+    return field
+
+
+def flat_vector_field(system: AbstractSystem, y0: Any):
+    """`(field, flat0, unravel)` for the state `y0` of `system`."""
+    leaves, treedef = jax.tree_util.tree_flatten(tuple(y0))
+    layout = (
+        treedef,
+        tuple(np.shape(x) for x in leaves),
+        tuple(np.result_type(x).name for x in leaves),
+    )
+    field = _one_field_per_system(system, layout)
+    if all(isinstance(x, np.ndarray) for x in leaves):  # heyoka's route: no JAX op
+        flat0 = np.concatenate([np.ravel(x) for x in leaves])
+    else:
+        flat0 = ravel_pytree(tuple(y0))[0]
+    return field, flat0, field.unravel
 
 
 def simulate_taylor(
@@ -134,10 +194,13 @@ def simulate_taylor(
             field, np.asarray(flat0), float(t0), float(t1), ts=ts, args=args,
             rtol=rtol, atol=atol, max_steps=steps, throw=False,
         )  # fmt: skip
-        saved_ts, flat_ys = jnp.asarray(solution.ts), jnp.asarray(solution.ys)
+        saved_ts, flat_ys = np.asarray(solution.ts), np.asarray(solution.ys)
         result = _HEYOKA_RESULTS.get(str(solution.status).split(".")[-1])
         result = diffrax.RESULTS.internal_error if result is None else result
-        num_steps = jnp.asarray(solution.num_steps)
+        num_steps = np.asarray(solution.num_steps)
+        status = str(solution.status).split(".")[-1]
+        # NumPy to the end: no eager JAX dispatch on the fast CPU route
+        ys = _unravel_rows(field, flat_ys)
     else:
         solution = taylor_integrate(
             field, flat0, t0, t1, ts=ts, args=args, rtol=rtol, atol=atol,
@@ -145,18 +208,31 @@ def simulate_taylor(
         )  # fmt: skip
         saved_ts, flat_ys, num_steps = solution.ts, solution.ys, solution.num_steps
         result = _as_diffrax_result(solution.result)
-    ys = jax.vmap(unravel)(flat_ys)
-    stats = {
+        ys = jax.vmap(unravel)(flat_ys)
+    stats: dict[str, Any] = {
         "num_steps": num_steps,
         "num_accepted_steps": num_steps,
         "num_rejected_steps": 0 * num_steps,
-        "max_steps": jnp.asarray(steps),
-        "finite": jnp.all(jnp.isfinite(flat_ys)),
+        "max_steps": steps,
+        "finite": np.all(np.isfinite(flat_ys))
+        if isinstance(flat_ys, np.ndarray)
+        else jnp.all(jnp.isfinite(flat_ys)),
     }
+    if solver.backend == "heyoka":
+        stats["heyoka_status"] = status
     return Trajectory(
         ts=saved_ts, ys=ys, system=system, args=args, run_stats=stats,
         result=result, solver_name=f"Taylor[{solver.backend}]",
     )  # fmt: skip
+
+
+def _unravel_rows(field: FlatVectorField, flat_ys: np.ndarray) -> Any:
+    """Each row of `flat_ys` as (q, second), in NumPy, a leading axis per leaf."""
+    treedef, shapes, _ = field.layout
+    sizes = [int(np.prod(shape)) for shape in shapes]
+    pieces = np.split(flat_ys, np.cumsum(sizes)[:-1], axis=1)
+    leaves = [p.reshape((len(flat_ys), *shape)) for p, shape in zip(pieces, shapes)]
+    return jax.tree_util.tree_unflatten(treedef, leaves)
 
 
 def _as_diffrax_result(result: Any) -> Any:
