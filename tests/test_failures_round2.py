@@ -128,3 +128,39 @@ def test_true_quadratic_declaration_is_accepted():
     y0 = (jnp.array([1.0, 0.0]), jnp.array([0.0, 0.3]))
     trajectory = lj.simulate(lagrangian, y0, t1=0.5, dt=0.05)
     assert trajectory.result == diffrax.RESULTS.successful
+
+
+# -- Phase-space tools need an autonomous system ---------------------------------
+
+
+def mathieu(q, qd, t):
+    return 0.5 * qd**2 - 0.5 * (1.0 - 2 * 0.4 * jnp.cos(2 * t)) * q**2
+
+
+def test_phase_space_tools_refuse_a_driven_system():
+    system, y0 = lj.Lagrangian(mathieu), (0.1, 0.0)
+    pattern = r"autonomous.*depend on t explicitly.*extended phase space"
+    with pytest.raises(ValueError, match=pattern):
+        lj.lyapunov_spectrum(system, y0, 10.0, dt=0.01)
+    with pytest.raises(ValueError, match=pattern):
+        lj.megno(system, y0, 10.0, dt=0.01)
+    with pytest.raises(ValueError, match=pattern):
+        lj.poincare_section(system, (jnp.array([0.1]), jnp.array([0.0])), 10.0,
+                            lambda q, p: q, dt=0.01)  # fmt: skip
+
+
+def test_phase_space_tools_refuse_a_drive_hidden_at_equilibrium():
+    # At q = 0 the Mathieu rate is (0, 0) at every t: the probe beside y0 sees it.
+    with pytest.raises(ValueError, match=r"autonomous"):
+        lj.lyapunov_spectrum(lj.Lagrangian(mathieu), (0.0, 0.0), 10.0, dt=0.01)
+
+
+def test_phase_space_tools_take_an_autonomous_l_that_accepts_t():
+    # L(q, q̇, t, args) that ignores t: the oscillator's exponents are 0.
+    def oscillator(q, qd, t, args):
+        return 0.5 * qd**2 - 0.5 * args * q**2
+
+    spectrum = lj.lyapunov_spectrum(
+        lj.Lagrangian(oscillator), (0.1, 0.0), 20.0, dt=0.01, args=1.0
+    )
+    assert np.all(np.abs(np.asarray(spectrum.exponents)) < 0.2)

@@ -26,6 +26,7 @@ from jax.flatten_util import ravel_pytree
 
 from lagjax._core.system import AbstractSystem
 from lagjax._integrate.simulate import simulate
+from lagjax.phase_space.autonomy import refuse_time_dependence
 
 
 class PhaseFlow(eqx.Module):
@@ -117,6 +118,8 @@ def phase_flow(
             f"Hamiltonian; got {type(y0).__name__}."
         )
     y0 = jax.tree_util.tree_map(jnp.asarray, y0)
+    resolved, resolved_args = resolve_system(system, args)
+    refuse_time_dependence(resolved, y0, resolved_args)
     flat = ravel_pytree(y0)[0]
     leaves, structure = jax.tree_util.tree_flatten(y0)
     shapes = tuple(tuple(leaf.shape) for leaf in leaves)
