@@ -164,3 +164,32 @@ def test_phase_space_tools_take_an_autonomous_l_that_accepts_t():
         lj.Lagrangian(oscillator), (0.1, 0.0), 20.0, dt=0.01, args=1.0
     )
     assert np.all(np.abs(np.asarray(spectrum.exponents)) < 0.2)
+
+
+# -- Time and precision kept -----------------------------------------------------
+
+
+def pendulum(q, qd):
+    return 0.5 * qd**2 + jnp.cos(q)
+
+
+def test_a_step_below_the_resolution_of_time_is_refused():
+    # At t = 1e15 one ulp is 0.125: t0 + k·0.01 rounds to steps of 0 or 0.125.
+    with pytest.raises(
+        ValueError, match=r"too fine for times near 1e\+15.*starts at 0"
+    ):
+        lj.simulate(lj.Lagrangian(pendulum), (1.0, 0.0), t0=1e15, t1=1e15 + 1.0,
+                    dt=0.01)  # fmt: skip
+
+
+def test_a_float32_step_below_the_resolution_of_time_is_refused():
+    y0 = (jnp.float32(1.0), jnp.float32(0.0))
+    with pytest.raises(ValueError, match=r"float32.*starts at 0.*jax_enable_x64"):
+        lj.simulate(lj.Lagrangian(pendulum), y0, t0=1e6, t1=1e6 + 1.0, dt=1e-3)
+
+
+def test_float64_data_without_x64_warns():
+    with jax.enable_x64(False):
+        with pytest.warns(UserWarning, match=r"float32.*jax_enable_x64"):
+            lj.simulate(lj.Lagrangian(pendulum), (np.float64(1.0), np.float64(0.0)),
+                        t1=0.1, dt=0.01)  # fmt: skip

@@ -11,7 +11,8 @@ are checked. Every refusal names the problem and what to do instead:
 | `system` | not a lagjax system (a bare function, a class, …) | `Lagrangian(L)`, `Hamiltonian(H)`, `Scene()` |
 | `solver` | a class, a string, a non-solver, an SDE or IMEX solver | `Tsit5()`, a lagjax solver instance |
 | `max_steps` | not a positive integer | a positive `int` or None |
-| `t0`, `t1`, `dt` | NaN, inf, not a real number; `dt = 0`; more than 10⁹ steps | finite times, a larger `dt` |
+| `t0`, `t1`, `dt` | NaN, inf, not a real number; `dt = 0`; more than 10⁹ steps; `dt` under 10³ ulps of the largest time | finite times, a larger `dt`, time shifted to start at 0 |
+| `y0` | float64 arrays while JAX's x64 mode is off (a warning) | `jax.config.update("jax_enable_x64", True)` |
 | `ts` | NaN, not 1-D, unsorted, outside [t0, t1] | sorted times inside the span |
 | `y0` | not a pair; q and its partner of different structure or shape; NaN/inf; float16; complex or boolean | `(q0, qdot0)` / `(q0, p0)` of matching shapes, float32/64 |
 | `y0` of a `RigidBody` | quaternion not of shape (4,), zero; momentum not (3,) | a unit quaternion, e.g. `(1, 0, 0, 0)` |
@@ -34,12 +35,15 @@ from __future__ import annotations
 import math
 import numbers
 import typing
+import warnings
 from typing import Any
 
 import diffrax
+import jax
 import numpy as np
 from jax.core import Tracer
 
+from lagjax._core.precision import working_dtype
 from lagjax._core.system import AbstractSystem
 from lagjax._integrate.checks.initial_state import (
     check_initial_state,
@@ -79,7 +83,10 @@ def check_simulate_inputs(
     check_times(t0, t1, dt)
     check_save_times(ts, t0, t1)
     del args  # a scene's parameters are its fields; nothing to check in args
-    return check_initial_state(system, y0)
+    warn_float64_without_x64(y0)
+    y0 = check_initial_state(system, y0)
+    check_time_resolution(t0, t1, dt, working_dtype(y0))
+    return y0
 
 
 def _user_system(system: Any) -> Any:
@@ -218,6 +225,55 @@ def check_times(t0: Any, t1: Any, dt: Any) -> None:
             f"than {MAX_FIXED_STEPS:.0e}: the run would never finish. Pass a larger "
             "dt (the scene's own scale is usually 1e-3 to 1e-2 of a period), or "
             "dt=None for adaptive stepping"
+        )
+
+
+# A step must span this many ulps of the largest time. The grid t0 + k·dt rounds
+# each step by up to an ulp: at 64 ulps the steps wobble by 1.6 %, which a
+# symplectic run still takes at round-off energy error (float32 Kepler, 100
+# orbits at 103 ulps, `tests/test_precision.py`); far below, the steps round to
+# 0 or one ulp (t0 = 1e15, dt = 0.01: 0.5398 instead of 0.5403 at t0 = 0).
+_STEP_IN_ULPS = 64
+
+
+def check_time_resolution(t0: Any, t1: Any, dt: Any, dtype: Any) -> None:
+    """Refuse a `dt` the run's time cannot resolve (t0 = 1e15, dt = 0.01 in float64:
+    the times round to steps of 0 or 0.125, and the answer silently differs from
+    the same run started at 0)."""
+    if dt is None:
+        return
+    times = [_concrete_scalar(x, n) for x, n in ((t0, "t0"), (t1, "t1"), (dt, "dt"))]
+    if any(x is None for x in times):
+        return
+    start, end, step = typing.cast(list[float], times)
+    largest = max(abs(start), abs(end))
+    ulp = float(np.spacing(np.asarray(largest, dtype=dtype)))
+    if abs(step) >= _STEP_IN_ULPS * ulp:
+        return
+    raise ValueError(
+        f"dt = {step:g} is too fine for times near {largest:g} in {np.dtype(dtype)} "
+        f"(one ulp of t there is {ulp:g}): the grid t0 + k·dt would round each step "
+        "to a multiple of that ulp, and the run would take steps of the wrong "
+        "length. Shift time so the run starts at 0 (t0=0, t1=t1-t0; a system that "
+        "uses t can take the offset through args), or use a larger dt"
+        + (", or run in float64 (y0 as float64, with "
+           "jax.config.update('jax_enable_x64', True))"
+           if np.dtype(dtype).itemsize < 8 else "")
+    )  # fmt: skip
+
+
+def warn_float64_without_x64(y0: Any) -> None:
+    """Warn when float64 data in `y0` will run in float32 (x64 is off)."""
+    if jax.config.jax_enable_x64:
+        return
+    leaves = jax.tree_util.tree_leaves(y0)
+    if any(getattr(leaf, "dtype", None) == np.float64 for leaf in leaves):
+        warnings.warn(
+            "y0 holds float64 values, but JAX's 64-bit mode is off, so the run "
+            "works in float32 (about 7 significant digits). To run in float64, "
+            'call jax.config.update("jax_enable_x64", True) at the start of the '
+            "program, before any JAX array is made",
+            stacklevel=3,
         )
 
 
