@@ -264,7 +264,7 @@ def check_time_resolution(t0: Any, t1: Any, dt: Any, dtype: Any) -> None:
 
 def warn_float64_without_x64(y0: Any) -> None:
     """Warn when float64 data in `y0` will run in float32 (x64 is off)."""
-    if jax.config.jax_enable_x64:
+    if jax.config.read("jax_enable_x64"):
         return
     leaves = jax.tree_util.tree_leaves(y0)
     if any(getattr(leaf, "dtype", None) == np.float64 for leaf in leaves):
