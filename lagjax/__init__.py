@@ -20,6 +20,10 @@ from lagjax._core.terms import RigidBodyTerm as RigidBodyTerm
 from lagjax._integrate.checks.late_failure import SimulationError as SimulationError
 from lagjax._integrate.reversible_adjoint import ReversibleAdjoint as ReversibleAdjoint
 from lagjax._integrate.simulate import simulate as simulate
+from lagjax._sweep.progress import SweepProgress as SweepProgress
+from lagjax._sweep.reader import SweepStore as SweepStore
+from lagjax._sweep.reader import open_sweep as open_sweep
+from lagjax._sweep.to_disk import sweep_to_disk as sweep_to_disk
 from lagjax.action_principle import action as action
 from lagjax.action_principle import action_between as action_between
 from lagjax.action_principle import action_of_path as action_of_path

@@ -2,19 +2,20 @@
 
 The batch (leading axis of `y0s` and of `args_batch`) is split over all devices with
 `jax.sharding` — a one-axis `Mesh` and a `NamedSharding` over it — so the same call
-runs on one CPU, on several GPUs, or across hosts after
-`jax.distributed.initialize()`. A batch whose size does not divide the device count
-is padded (with copies of its last member) and the padding dropped from the result.
-Large batches are processed in chunks of `chunk_size`, so memory stays bounded by
-one chunk.
+runs on one CPU or on several GPUs; across processes or hosts, after
+`jax.distributed.initialize()`, each process runs its share of the chunks on its own
+devices (`lagjax._sweep.processes`). A chunk whose size does not divide the device
+count is padded (with copies of its last member) and the padding dropped from the
+result. Large batches are processed in chunks of `chunk_size`, so memory stays
+bounded by one chunk; `lj.sweep_to_disk` streams the chunks to a directory.
 """
 
 from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Sequence
-from typing import Any
+from collections.abc import Callable, Sequence
+from typing import Any, NamedTuple
 
 import equinox as eqx
 import jax
@@ -23,18 +24,44 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from lagjax._integrate.simulate import System, simulate
+from lagjax._sweep.processes import (
+    check_a_chunk_for_every_process,
+    chunks_of_this_process,
+    gather_chunks,
+)
 from lagjax.trajectory import Trajectory
 
 _AXIS = "batch"
 
 
-def _batch_size(tree: Any) -> int:
-    sizes = {int(np.shape(leaf)[0]) for leaf in jax.tree_util.tree_leaves(tree)}
-    if len(sizes) != 1:
+def batch_size(y0s: Any, args_batch: Any) -> int:
+    """The common leading size of every leaf of `y0s` and `args_batch`, or a
+    refusal that names the inputs whose sizes differ."""
+    sizes = {}
+    for name, tree in (("y0s", y0s), ("args_batch", args_batch)):
+        for path, leaf in jax.tree_util.tree_leaves_with_path(tree):
+            if not np.shape(leaf):
+                raise ValueError(
+                    f"{name}{jax.tree_util.keystr(path)} has no batch axis"
+                )
+            sizes[name + jax.tree_util.keystr(path)] = int(np.shape(leaf)[0])
+    if not sizes:
+        raise ValueError("y0s holds no arrays: nothing to sweep over")
+    if len(set(sizes.values())) != 1:
         raise ValueError(
-            f"every batched input needs the same leading size, got {sizes}"
+            "every batched input needs the same leading size, got "
+            + ", ".join(f"{name}: {size}" for name, size in sizes.items())
         )
-    return sizes.pop()
+    return next(iter(sizes.values()))
+
+
+def check_chunk_size(chunk_size: Any) -> None:
+    if chunk_size is None:
+        return
+    if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)):
+        raise TypeError(f"chunk_size must be a positive integer, got {chunk_size!r}")
+    if chunk_size < 1:
+        raise ValueError(f"chunk_size must be a positive integer, got {chunk_size}")
 
 
 def _pad(tree: Any, size: int) -> Any:
@@ -69,6 +96,53 @@ def _simulate_members(system, shared_args, simulate_kwargs, members):
     return jax.vmap(one)(members)
 
 
+class ChunkedRun(NamedTuple):
+    """A sweep cut into chunks of `step` members: chunk `i` holds the members
+    `[i * step, min((i + 1) * step, size))`, whichever process runs it, so a member
+    meets the same compiled program at the same position in every run."""
+
+    size: int
+    step: int
+    count: int
+    run: Callable[[int], Trajectory]  # chunk index -> its members' trajectories
+
+
+def chunked_run(
+    system: System,
+    y0s: Any,
+    args_batch: Any,
+    chunk_size: int | None,
+    devices: Sequence[Any] | None,
+    simulate_kwargs: dict[str, Any],
+) -> ChunkedRun:
+    """Check the batch and prepare the chunks of a sweep over this process's
+    `devices` (default: its local devices)."""
+    check_chunk_size(chunk_size)
+    devices = list(jax.local_devices() if devices is None else devices)
+    simulate_kwargs = dict(simulate_kwargs)
+    shared_args = simulate_kwargs.pop("args", None)
+    batched = (y0s, args_batch)
+    size = batch_size(y0s, args_batch)
+    step = len(devices) * math.ceil((chunk_size or size) / len(devices))
+    mesh = Mesh(np.array(devices), (_AXIS,))
+    sharding = NamedSharding(mesh, PartitionSpec(_AXIS))
+    simulate_members = functools.partial(
+        _simulate_members, system, shared_args, simulate_kwargs
+    )
+
+    def run(index: int) -> Trajectory:
+        start = index * step
+        stop = min(start + step, size)
+        # Padded to a full chunk, so every chunk runs the one compiled program;
+        # the computation follows its input's sharding: one piece per device.
+        padded = _pad(_take(batched, start, stop), step)
+        return _take(
+            simulate_members(jax.device_put(padded, sharding)), 0, stop - start
+        )
+
+    return ChunkedRun(size, step, math.ceil(size / step), run)
+
+
 def sweep(
     system: System,
     y0s: Any,
@@ -86,29 +160,26 @@ def sweep(
       `simulate_kwargs["args"]` across the batch.
     - `chunk_size`: at most this many members at a time (rounded up to a multiple of
       the device count); default: the whole batch at once.
-    - `devices`: default `jax.devices()` (all devices of all processes).
+    - `devices`: default `jax.local_devices()` (this process's devices).
     - `simulate_kwargs`: passed to `simulate` (t1, dt, solver, ts, …).
+
+    After `jax.distributed.initialize()` (several processes, one program each), every
+    process runs every `jax.process_count()`-th chunk on its own devices and the
+    chunks are gathered: each process returns the whole sweep, bit-identical to the
+    one-process run with the same chunk size and devices per process
+    (`lagjax._sweep.processes`). `lj.sweep_to_disk` writes the chunks instead.
 
     **Returns:** one `Trajectory` whose arrays have a leading batch axis. Results
     equal `jax.vmap` of `simulate` over the batch up to rounding (XLA compiles the
     per-device batch separately and may vectorize it differently: ≤ 2 ulp measured).
     """
-    devices = list(jax.devices() if devices is None else devices)
-    shared_args = simulate_kwargs.pop("args", None)
-    batched = (y0s, args_batch)
-    size = _batch_size(batched)
-    step = len(devices) * math.ceil((chunk_size or size) / len(devices))
-    mesh = Mesh(np.array(devices), (_AXIS,))
-    sharding = NamedSharding(mesh, PartitionSpec(_AXIS))
-
-    run = functools.partial(_simulate_members, system, shared_args, simulate_kwargs)
-    pieces = []
-    for start in range(0, size, step):
-        chunk = _take(batched, start, min(start + step, size))
-        padded = _pad(chunk, step)
-        # The computation follows its input's sharding: one chunk per device.
-        result = run(jax.device_put(padded, sharding))
-        pieces.append(_take(result, 0, min(step, size - start)))
+    chunks = chunked_run(system, y0s, args_batch, chunk_size, devices, simulate_kwargs)
+    if jax.process_count() > 1:
+        check_a_chunk_for_every_process(chunks.count)
+    mine = chunks_of_this_process(chunks.count)
+    pieces = [chunks.run(index) for index in mine]
+    if jax.process_count() > 1:
+        return gather_chunks(pieces, mine, chunks.count, chunks.step, chunks.size)
     if len(pieces) == 1:
         return pieces[0]
     return jax.tree_util.tree_map(

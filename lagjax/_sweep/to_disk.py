@@ -1,0 +1,179 @@
+"""`sweep_to_disk`: a sweep whose results survive — streamed to a directory chunk
+by chunk, resumed after a crash, shared among JAX's processes.
+
+Every refusal comes before any integration: a chunk size that is not a positive
+integer, batch inputs of different sizes, a directory that cannot be written, one
+that holds other files or another sweep's chunks (fingerprint,
+`lagjax._sweep.fingerprint`), or the same sweep cut into other chunks. Members run
+with `throw=False`: a failing member is marked by its `RESULTS` code and the others
+are kept.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import jax
+
+from lagjax._integrate.simulate import System
+from lagjax._sweep.fingerprint import describe_sweep, versions
+from lagjax._sweep.processes import chunks_of_this_process, wait_for_all_processes
+from lagjax._sweep.progress import ProgressMeter, SweepProgress
+from lagjax._sweep.reader import SweepStore
+from lagjax._sweep.store import (
+    FORMAT,
+    completed_chunks,
+    field_descriptions,
+    read_index,
+    remove_own_leftovers,
+    result_messages,
+    trajectory_arrays,
+    write_chunk,
+    write_index,
+)
+from lagjax.sweep import ChunkedRun, chunked_run
+
+DEFAULT_CHUNK_SIZE = 4096
+
+
+def _writable_directory(out_dir: Path, tag: str) -> None:
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        probe = out_dir / f".write-probe-{tag}"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as error:
+        raise ValueError(f"out_dir {str(out_dir)!r} is not writable: {error}") from None
+
+
+def _new_index(fingerprint: str, parameters: dict, chunks: ChunkedRun) -> dict:
+    return {
+        "format": FORMAT,
+        "fingerprint": fingerprint,
+        "members": chunks.size,
+        "chunk_size": chunks.step,
+        "chunk_count": chunks.count,
+        "parameters": parameters,
+        "versions": versions(),
+        "fields": {},
+        "chunks": [],
+        "result_messages": {},
+        "complete": False,
+    }
+
+
+def _open_directory(
+    out_dir: Path, fingerprint: str, parameters: dict, chunks: ChunkedRun, tag: str
+) -> dict[str, Any]:
+    """The directory's index, after refusing anything but this sweep's own."""
+    _writable_directory(out_dir, tag)
+    index = read_index(out_dir)
+    if index is None:
+        others = sorted(p.name for p in out_dir.iterdir() if not p.name.startswith("."))
+        if others:
+            raise ValueError(
+                f"out_dir {str(out_dir)!r} holds files but no sweep index "
+                f"({', '.join(others[:5])}): give a new or empty directory"
+            )
+        index = _new_index(fingerprint, parameters, chunks)
+        write_index(out_dir, index, tag)
+        return index
+    if index.get("format") != FORMAT or index.get("fingerprint") != fingerprint:
+        raise ValueError(
+            f"out_dir {str(out_dir)!r} holds another sweep's chunks (fingerprint "
+            f"{str(index.get('fingerprint'))[:12]}…, this sweep's {fingerprint[:12]}…):"
+            " give a new directory, or remove that one to start over"
+        )
+    if index["chunk_size"] != chunks.step:
+        raise ValueError(
+            f"out_dir {str(out_dir)!r} holds this sweep in chunks of "
+            f"{index['chunk_size']} members, not {chunks.step}: pass "
+            f"chunk_size={index['chunk_size']} to resume it"
+        )
+    return index
+
+
+def _record(out_dir: Path, index: dict, done: dict[int, dict], tag: str) -> None:
+    index["chunks"] = list(done.values())
+    index["complete"] = len(done) == index["chunk_count"]
+    for entry in done.values():
+        index["result_messages"].update(entry["result_messages"])
+    write_index(out_dir, index, tag)
+
+
+def sweep_to_disk(
+    system: System,
+    y0s: Any,
+    args_batch: Any = None,
+    *,
+    out_dir: str | os.PathLike,
+    chunk_size: int | None = DEFAULT_CHUNK_SIZE,
+    devices: Sequence[Any] | None = None,
+    progress: bool | Callable[[SweepProgress], Any] = False,
+    **simulate_kwargs: Any,
+) -> SweepStore:
+    """`lj.sweep`, streamed to `out_dir` in chunks that survive the process.
+
+    **Arguments:** as `lj.sweep`, and
+    - `out_dir`: a new or empty directory, or one holding this same sweep (then it is
+      resumed after its completed chunks). The format: `lagjax._sweep.store`.
+    - `chunk_size`: members per chunk file (rounded up to a multiple of the device
+      count); default 4096. A resumed sweep needs the same.
+    - `progress`: True prints a line per chunk (members done, rate, time left); a
+      callable receives a `SweepProgress` per chunk.
+    - `simulate_kwargs`: passed to `simulate`, which runs with `throw=False`.
+
+    After `jax.distributed.initialize()` every process writes its share of the chunks
+    (`lagjax._sweep.processes`) to the same directory, which must then be on a file
+    system all processes see.
+
+    **Returns:** a `SweepStore` of the directory (`store.array("q")`, …).
+    """
+    if simulate_kwargs.get("throw", False):
+        raise ValueError(
+            "sweep_to_disk marks a failing member by its RESULTS code instead of "
+            "raising: leave out throw=True"
+        )
+    simulate_kwargs["throw"] = False
+    chunks = chunked_run(system, y0s, args_batch, chunk_size, devices, simulate_kwargs)
+    parameters, fingerprint = describe_sweep(system, y0s, args_batch, simulate_kwargs)
+    parameters["chunk_size"] = chunk_size
+    out_dir = Path(out_dir)
+    tag = f"{socket.gethostname()}-p{jax.process_index()}"
+    index = _open_directory(out_dir, fingerprint, parameters, chunks, tag)
+    remove_own_leftovers(out_dir, tag)
+    done = completed_chunks(out_dir)
+    mine = chunks_of_this_process(
+        chunks.count, [i for i in range(chunks.count) if i not in done]
+    )
+    meter = ProgressMeter(
+        progress,
+        chunks.size,
+        sum(e["stop"] - e["start"] for e in done.values()),
+        sum(min(chunks.step, chunks.size - i * chunks.step) for i in mine),
+        sum(e["failed"] for e in done.values()),
+        jax.process_index(),
+        jax.process_count(),
+    )
+    for chunk in mine:
+        traj = chunks.run(chunk)
+        arrays = trajectory_arrays(traj)
+        entry = write_chunk(
+            out_dir, chunk, chunk * chunks.step, arrays, result_messages(traj), tag
+        )
+        done[chunk] = entry
+        index["fields"] = index["fields"] or field_descriptions(arrays)
+        _record(out_dir, index, dict(sorted(done.items())), tag)
+        meter.chunk_written(chunk, entry["stop"] - entry["start"], entry["failed"])
+    if jax.process_count() > 1:
+        # The processes wrote their chunks side by side; one lists them all.
+        wait_for_all_processes("lagjax sweep_to_disk: chunks written")
+        if jax.process_index() == 0:
+            everything = read_index(out_dir) or index
+            _record(out_dir, everything, completed_chunks(out_dir), tag)
+        wait_for_all_processes("lagjax sweep_to_disk: index written")
+    return SweepStore(out_dir)
