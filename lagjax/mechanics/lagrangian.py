@@ -290,6 +290,8 @@ class Lagrangian(AbstractSystem):
         compiled run sees traced values and could only attach the error at run
         time, without the residuals in the message.
         """
+        if not self.quadratic_in_velocity and self.constraints is None:
+            return  # nothing to check: no conversion (an eager op) either
         q0, qdot0 = cast_floats(tuple(y0), dtype)
         if self.quadratic_in_velocity:
             check_declared_quadratic(

@@ -57,6 +57,9 @@ def _max_steps_message(trajectory: Any, max_steps: Any, rtol: float) -> str:
 
 def raise_if_failed(trajectory: Any, max_steps: Any, rtol: float) -> None:
     """Raise `SimulationError` when a concrete adaptive run did not succeed."""
+    succeeded = trajectory.run_stats.get("succeeded")
+    if succeeded is not None and bool(np.asarray(succeeded)):
+        return
     result = trajectory.result
     if result == diffrax.RESULTS.successful or result == diffrax.RESULTS.event_occurred:
         return

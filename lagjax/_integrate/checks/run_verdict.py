@@ -132,7 +132,8 @@ def judge_run(
     fixed_steps: bool,
     throw: bool,
 ) -> tuple[Any, Any, dict[str, jax.Array]]:
-    """`(ys, result, stats)` of a finished run: `stats["finite"]` always, and for
+    """`(ys, result, stats)` of a finished run: `stats["finite"]` and
+    `stats["succeeded"]` always, and for
     fixed steps `stats["energy_drift"]`, with `result` set to
     `nonlinear_divergence` when the drift is past the bound. With `throw` the
     messages are attached to `ys` (`eqx.error_if`)."""
@@ -152,4 +153,9 @@ def judge_run(
         if throw:
             ys = eqx.error_if(ys, diverged(drift), DIVERGENCE_MESSAGE)
         stats["energy_drift"] = drift
+    # computed in the compiled run, so a concrete caller reads it without an
+    # eager comparison of result codes (a compilation of its own)
+    stats["succeeded"] = (result == diffrax.RESULTS.successful) | (
+        result == diffrax.RESULTS.event_occurred
+    )
     return ys, result, stats
