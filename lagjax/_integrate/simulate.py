@@ -45,7 +45,11 @@ import jax.numpy as jnp
 import numpy as np
 from jax.core import Tracer
 
-from lagjax._core.precision import cast_floats, working_dtype
+from lagjax._core.precision import (
+    cast_floats,
+    python_floats_as_arrays,
+    working_dtype,
+)
 from lagjax._core.static_values import Constant
 from lagjax._core.system import AbstractSystem
 from lagjax._integrate.checks.inputs import check_simulate_inputs
@@ -172,6 +176,9 @@ def simulate(
     system, args = system.resolve(args)
     # The run works in y0's precision; float inputs follow it (lagjax._core.precision).
     dtype = working_dtype(y0)
+    # Python floats would be static parts of the compiled program: one compilation
+    # per value (`lagjax._core.precision.python_floats_as_arrays`).
+    y0, args = python_floats_as_arrays((y0, args), dtype)
     solver = chosen_solver(system, solver, dt, rtol)
     system.check_start(y0, t0, args, dtype)
     if dt is not None or not isinstance(
