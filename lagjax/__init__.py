@@ -82,6 +82,7 @@ from lagjax.solvers.splitting import SofSpa10 as SofSpa10
 from lagjax.solvers.splitting import StormerVerlet as StormerVerlet
 from lagjax.solvers.splitting import Yoshida4 as Yoshida4
 from lagjax.solvers.splitting import Yoshida6 as Yoshida6
+from lagjax.solvers.time_transformed import TimeTransformed as TimeTransformed
 from lagjax.solvers.variational import VariationalMidpoint as VariationalMidpoint
 from lagjax.sweep import sweep as sweep
 from lagjax.taylor.solver import Taylor as Taylor

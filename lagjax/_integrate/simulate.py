@@ -81,8 +81,10 @@ from lagjax._integrate.step_control import (
 )
 from lagjax._integrate.taylor_run import run_taylor
 from lagjax._integrate.time_grid import grid_step
+from lagjax._integrate.time_transformed_run import run_time_transformed
 from lagjax.solvers.hermite import HermiteDenseOutput, needs_hermite
 from lagjax.solvers.implicit import stage_failure_message
+from lagjax.solvers.time_transformed import TimeTransformed
 from lagjax.taylor.solver import Taylor
 from lagjax.trajectory import Trajectory
 
@@ -162,6 +164,12 @@ def simulate(
                           dense=dense, event=event, progress=progress,
                           stepsize_controller=stepsize_controller,
                           progress_meter=progress_meter)  # fmt: skip
+    if isinstance(solver, TimeTransformed):  # dt is the fictitious step ds
+        return run_time_transformed(system, y0, t0, t1, dt, solver, ts, args,
+                                    max_steps, throw, saveat=saveat, adjoint=adjoint,
+                                    dense=dense, event=event, progress=progress,
+                                    stepsize_controller=stepsize_controller,
+                                    progress_meter=progress_meter)  # fmt: skip
     t1, dt = defaults(system, t0, t1, dt, solver, stepsize_controller)
     y0 = check_simulate_inputs(system, y0, t0, t1, dt, solver, ts, args, max_steps)
     if progress and progress_meter is not None:

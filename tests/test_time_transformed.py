@@ -1,0 +1,215 @@
+"""Time-transformed splitting (`lj.TimeTransformed`): the logarithmic Hamiltonian
+on Kepler's problem, whose orbit it keeps exactly (energy, Runge–Lenz vector) and
+whose timing is checked against Kepler's equation; symplecticity and reversibility
+of the extended map; the order; jit, vmap and grad; refusals by name."""
+
+import diffrax
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from jax.flatten_util import ravel_pytree
+
+import lagjax as lj
+from lagjax.solvers.time_transformed import extended_state
+
+PERIOD = 2 * np.pi  # a = 1, GM = 1
+
+
+def kepler() -> lj.SeparableHamiltonian:
+    return lj.SeparableHamiltonian(lambda p: p @ p / 2, lambda q: -1 / jnp.sqrt(q @ q))
+
+
+def pericentre_state(e: float) -> tuple[jax.Array, jax.Array]:
+    """At pericentre on the x axis: q = (1 − e, 0), |p| = √((1 + e)/(1 − e))."""
+    return jnp.array([1 - e, 0.0]), jnp.array([0.0, np.sqrt((1 + e) / (1 - e))])
+
+
+def runge_lenz_angle(q, p) -> np.ndarray:
+    """Direction of A = p × L − q/r (the pericentre), per saved state."""
+    q, p = np.asarray(q), np.asarray(p)
+    angular = q[:, 0] * p[:, 1] - q[:, 1] * p[:, 0]
+    r = np.linalg.norm(q, axis=1)
+    ax = p[:, 1] * angular - q[:, 0] / r
+    ay = -p[:, 0] * angular - q[:, 1] / r
+    return np.arctan2(ay, ax)
+
+
+def kepler_position(t, e: float) -> np.ndarray:
+    """Closed form from pericentre: M = t = E − e sin E, q = (cos E − e, √(1−e²) sin E)."""
+    mean = np.asarray(t, dtype=float)
+    eccentric = mean + e * np.sin(mean)
+    for _ in range(60):  # Newton on Kepler's equation
+        eccentric -= (eccentric - e * np.sin(eccentric) - mean) / (
+            1 - e * np.cos(eccentric)
+        )
+    return np.stack(
+        [np.cos(eccentric) - e, np.sqrt(1 - e**2) * np.sin(eccentric)], axis=-1
+    )
+
+
+# Yoshida4 at e = 0.99 reaches 1.3e-12 at saves that fall on the pericentre, where
+# H = T + V is a difference of numbers 200 times larger (a few ulps of p there);
+# Störmer–Verlet, without negative substeps, stays at 5e-14.
+@pytest.mark.parametrize(
+    "e, splitting", [(0.9, lj.Yoshida4()), (0.99, lj.StormerVerlet())]
+)
+def test_kepler_energy_and_orbit_shape_kept_over_100_periods(e, splitting):
+    ts = np.linspace(0, 100 * PERIOD, 401)
+    traj = lj.simulate(kepler(), pericentre_state(e), t1=ts[-1], dt=0.05, ts=ts,
+                       solver=lj.TimeTransformed(splitting))  # fmt: skip
+    # dt/ds = r: 2π/ds ≈ 126 steps per period whatever the eccentricity.
+    assert int(traj.stats["num_steps"]) < 130 * 100
+    error = np.abs(np.asarray(traj.energy()) / -0.5 - 1)
+    assert error.max() <= 1e-12
+    # No secular trend: the last quarter no worse than round-off above the first.
+    assert error[-100:].max() <= error[:100].max() + 5e-14
+    drift = np.abs(runge_lenz_angle(traj.q, traj.p))
+    assert drift.max() <= 1e-10
+    assert float(traj.stats["time_residual"]) <= 1e-12 * ts[-1]
+
+
+def test_timing_follows_keplers_equation():
+    """Kahan–Li's eighth order: the time along the exact orbit to 1e-9 after 100
+    periods at 126 steps per period (Yoshida4 at the same step: 1e-3)."""
+    e = 0.9
+    ts = np.linspace(0, 100 * PERIOD, 37)
+    traj = lj.simulate(kepler(), pericentre_state(e), t1=ts[-1], dt=0.05, ts=ts,
+                       solver=lj.TimeTransformed(lj.KahanLi8()))  # fmt: skip
+    assert np.abs(np.asarray(traj.q) - kepler_position(ts, e)).max() <= 1e-9
+
+
+def _one_step(splitting, ds):
+    """The extended map Y ↦ Φ_ds(Y) on the flat ((p, p_t), (q, t)) of Kepler's
+    problem, and the start state."""
+    solver = lj.TimeTransformed(splitting)
+    terms = solver.terms(kepler())
+    start = extended_state(kepler(), pericentre_state(0.6), 0.0, None)
+    flat, unravel = ravel_pytree(start)
+
+    def step(y):
+        y = unravel(y)
+        state = splitting.init(terms, 0.0, ds, y, None)
+        y1, *_ = splitting.step(terms, 0.0, ds, y, None, state, False)
+        return ravel_pytree(y1)[0]
+
+    return step, flat
+
+
+@pytest.mark.parametrize("splitting", [lj.Yoshida4(), lj.BlanesMoan6()])
+def test_extended_map_is_symplectic(splitting):
+    step, flat = _one_step(splitting, 0.3)
+    jacobian = jax.jacfwd(step)(flat)
+    n = flat.size // 2  # flat order: p, p_t, q, t: momenta first
+    identity = np.eye(n)
+    form = np.block([[np.zeros((n, n)), -identity], [identity, np.zeros((n, n))]])
+    defect = jacobian.T @ form @ jacobian - form
+    assert np.abs(defect).max() <= 1e-12
+    assert np.abs(jacobian - np.eye(2 * n)).max() > 1e-2  # a real step
+
+
+def test_extended_map_is_time_reversible():
+    forward, flat = _one_step(lj.Yoshida4(), 0.3)
+    backward, _ = _one_step(lj.Yoshida4(), -0.3)
+    there = forward(flat)
+    assert np.abs(there - flat).max() > 1e-2
+    assert np.abs(backward(there) - flat).max() <= 1e-13
+
+
+def perturbed_kepler() -> lj.SeparableHamiltonian:
+    """Kepler with a 1/r³ term: precessing orbits, no closed form."""
+    return lj.SeparableHamiltonian(
+        lambda p: p @ p / 2,
+        lambda q: -1 / jnp.sqrt(q @ q) - 0.01 / jnp.sqrt(q @ q) ** 3,
+    )
+
+
+def test_fourth_order_on_a_precessing_orbit():
+    y0, t1 = pericentre_state(0.5), 7.0
+    run = lambda splitting, ds: np.asarray(
+        lj.simulate(perturbed_kepler(), y0, t1=t1, dt=ds,
+                    solver=lj.TimeTransformed(splitting)).q[-1]
+    )  # fmt: skip
+    reference = run(lj.KahanLi8(), 0.01)
+    steps = np.array([0.2, 0.1, 0.05])
+    errors = [np.abs(run(lj.Yoshida4(), ds) - reference).max() for ds in steps]
+    slope = np.polyfit(np.log(steps), np.log(errors), 1)[0]
+    assert 3.7 <= slope <= 4.3, (errors, slope)
+
+
+def test_a_users_weight_gives_the_same_orbit():
+    """w(x) = x^(-3/2): dt/ds = r^(3/2), steps still finer at pericentre."""
+    e, ts = 0.7, np.linspace(0, 3 * PERIOD, 7)
+    solver = lj.TimeTransformed(lj.KahanLi8(), weight=lambda x: x**-1.5)
+    traj = lj.simulate(kepler(), pericentre_state(e), t1=ts[-1], dt=0.02, ts=ts,
+                       solver=solver)  # fmt: skip
+    assert np.abs(np.asarray(traj.q) - kepler_position(ts, e)).max() <= 1e-8
+
+
+def test_vmap_over_eccentricities_and_jit():
+    eccentricities = jnp.array([0.5, 0.9, 0.99])
+    solver = lj.TimeTransformed(lj.Yoshida4())
+
+    @jax.jit
+    def final_position(e):
+        q0 = jnp.array([1 - e, 0.0])
+        p0 = jnp.array([0.0, jnp.sqrt((1 + e) / (1 - e))])
+        return lj.simulate(kepler(), (q0, p0), t1=PERIOD, dt=0.01, solver=solver).q[-1]
+
+    batched = jax.vmap(final_position)(eccentricities)
+    for e, q in zip(eccentricities, batched):
+        alone = lj.simulate(kepler(), pericentre_state(float(e)), t1=PERIOD,
+                            dt=0.01, solver=solver).q[-1]  # fmt: skip
+        assert np.abs(q - alone).max() <= 1e-13
+    # After one period, back at pericentre.
+    expected = np.stack([1 - eccentricities, 0 * eccentricities], axis=1)
+    assert np.abs(batched - expected).max() <= 1e-6
+
+
+def test_grad_through_a_bounded_run_matches_finite_differences():
+    solver = lj.TimeTransformed(lj.Yoshida4())
+
+    def x_final(speed):
+        y0 = (jnp.array([0.5, 0.0]), jnp.array([0.0, speed]))
+        traj = lj.simulate(kepler(), y0, t1=4.0, dt=0.02, solver=solver,
+                           max_steps=600)  # fmt: skip
+        return traj.q[-1, 0]
+
+    speed, h = 1.6, 1e-5
+    gradient = jax.grad(x_final)(speed)
+    finite = (x_final(speed + h) - x_final(speed - h)) / (2 * h)
+    assert abs(gradient - finite) <= 1e-6 * max(1.0, abs(finite))
+    assert abs(gradient) > 1e-2
+
+
+def test_too_few_steps_is_reported():
+    solver = lj.TimeTransformed(lj.Yoshida4())
+    y0 = pericentre_state(0.5)
+    with pytest.raises(Exception, match="did not reach the last save time"):
+        lj.simulate(kepler(), y0, t1=10.0, dt=0.05, solver=solver, max_steps=10)
+    traj = lj.simulate(kepler(), y0, t1=10.0, dt=0.05, solver=solver,
+                       max_steps=10, throw=False)  # fmt: skip
+    assert traj.result == diffrax.RESULTS.max_steps_reached
+    assert np.isnan(np.asarray(traj.q)).all()
+
+
+def test_refusals_name_the_problem():
+    solver = lj.TimeTransformed(lj.Yoshida4())
+    y0 = pericentre_state(0.5)
+    general = lj.Hamiltonian(lambda q, p: p @ p / 2 - 1 / jnp.sqrt(q @ q))
+    with pytest.raises(ValueError, match=r"T\(p\) \+ V\(q\)"):
+        lj.simulate(general, y0, t1=1.0, dt=0.05, solver=solver)
+    repulsive = lj.SeparableHamiltonian(
+        lambda p: p @ p / 2, lambda q: 1 / jnp.sqrt(q @ q)
+    )
+    with pytest.raises(ValueError, match="weight"):
+        lj.simulate(repulsive, y0, t1=1.0, dt=0.05, solver=solver)
+    for ds in (0.0, -0.1):
+        with pytest.raises(ValueError, match="fictitious step"):
+            lj.simulate(kepler(), y0, t1=1.0, dt=ds, solver=solver)
+    with pytest.raises(ValueError, match="fictitious step"):
+        lj.simulate(kepler(), y0, t1=1.0, solver=solver)
+    with pytest.raises(ValueError, match="Nyström"):
+        lj.TimeTransformed(lj.BlanesMoanNystrom6())
+    with pytest.raises(ValueError, match="dense"):
+        lj.simulate(kepler(), y0, t1=1.0, dt=0.05, solver=solver, dense=True)
