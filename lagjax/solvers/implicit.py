@@ -108,6 +108,17 @@ def default_stage_solver() -> StageSolver:
     return StageIteration(rtol=STAGE_TOLERANCE, atol=STAGE_TOLERANCE)
 
 
+def _stage_options(root_finder: Any, y0_flat: Any) -> dict[str, Any]:
+    """The state's size, capped at 1, for `StageIteration`'s absolute tolerance
+    (its docstring); other root finders get no options. Capped: above 1 a looser
+    stopping test would leave a non-symplectic error that drifts (the chaotic
+    double pendulum's energy, `tests/test_implicit.py`)."""
+    if not isinstance(root_finder, StageIteration):
+        return {}
+    tiny = jnp.finfo(y0_flat.dtype).tiny
+    return {"scale": jnp.clip(jnp.max(jnp.abs(y0_flat)), tiny, 1.0)}
+
+
 def stage_failure_message(solver: diffrax.AbstractSolver) -> str:
     """What to tell the user when the stage equations of `solver` did not converge.
 
@@ -245,6 +256,7 @@ class AbstractGaussLegendre(
             self.root_finder,
             guess,
             (t0, t1, y0_flat, args, terms.contr(t0, t1)),
+            options=_stage_options(self.root_finder, y0_flat),
             max_steps=self.root_find_max_steps,
             throw=False,
         )
