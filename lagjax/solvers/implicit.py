@@ -116,7 +116,9 @@ def _stage_options(root_finder: Any, y0_flat: Any) -> dict[str, Any]:
     if not isinstance(root_finder, StageIteration):
         return {}
     tiny = jnp.finfo(y0_flat.dtype).tiny
-    return {"scale": jnp.clip(jnp.max(jnp.abs(y0_flat)), tiny, 1.0)}
+    # a stopping tolerance carries no derivative (and must not, under jvp/grad)
+    size = jax.lax.stop_gradient(jnp.max(jnp.abs(y0_flat)))
+    return {"scale": jnp.clip(size, tiny, 1.0)}
 
 
 def stage_failure_message(solver: diffrax.AbstractSolver) -> str:

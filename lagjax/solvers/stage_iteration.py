@@ -69,7 +69,11 @@ class StageIteration(optx.AbstractFixedPointSolver):
         new_y, aux = fn(y, args)
         dtype = _dtype_of(y)
         rtol = reachable_tolerance(self.rtol, dtype)
-        atol = reachable_tolerance(self.atol, dtype) * options.get("scale", 1.0)
+        # never 0: a state at rest at 0 iterates 0 → 0, and 0/0 would never stop
+        atol = jnp.maximum(
+            reachable_tolerance(self.atol, dtype) * options.get("scale", 1.0),
+            jnp.finfo(dtype).tiny,
+        )
         scaled = jax.tree_util.tree_map(
             lambda new, old: (new - old) / (atol + rtol * jnp.abs(new)), new_y, y
         )
