@@ -126,7 +126,20 @@ def _loss(system, solver, dt, steps, adjoint, ts=None):
     return loss
 
 
-@pytest.mark.parametrize("family", FAMILIES)
+# The three costliest to compile run in CI's second step (marker `integration`), so
+# the default suite stays under 10 minutes; every family is checked in CI.
+LONG_COMPILES = {"BlanesMoan4-plain-sum", "VariationalMidpoint", "RigidBodyYoshida4"}
+
+
+@pytest.mark.parametrize(
+    "family",
+    [
+        pytest.param(name, marks=pytest.mark.integration)
+        if name in LONG_COMPILES
+        else name
+        for name in FAMILIES
+    ],
+)
 def test_agrees_with_the_plain_scan_for_every_reversible_family(family):
     make, solver, dt = FAMILIES[family]
     system, y0, args = make()
@@ -188,6 +201,7 @@ def test_gradient_in_a_parameter_matches_finite_differences():
     assert abs(float(derivative - difference)) < 1e-6 * abs(float(derivative))
 
 
+@pytest.mark.integration  # long compile: CI's second step
 def test_batched_gradients():
     system, y0, _ = _kepler()
     loss = _loss(system, lj.Yoshida4(), 0.01, 300, lj.ReversibleAdjoint())
@@ -197,6 +211,7 @@ def test_batched_gradients():
     np.testing.assert_allclose(batched, one_by_one, rtol=1e-13)
 
 
+@pytest.mark.integration  # long compile: CI's second step
 def test_checkpoints_bound_the_round_off_of_the_walk_back_in_float32():
     # Uncompensated float32: each step back commits the round-off of a step, so
     # the reconstructed states drift from the forward run's; restarting from the

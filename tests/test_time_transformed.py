@@ -146,6 +146,7 @@ def test_a_users_weight_gives_the_same_orbit():
     assert np.abs(np.asarray(traj.q) - kepler_position(ts, e)).max() <= 1e-8
 
 
+@pytest.mark.integration  # long compile: CI's second step
 def test_vmap_over_eccentricities_and_jit():
     eccentricities = jnp.array([0.5, 0.9, 0.99])
     solver = lj.TimeTransformed(lj.Yoshida4())
@@ -166,6 +167,7 @@ def test_vmap_over_eccentricities_and_jit():
     assert np.abs(batched - expected).max() <= 1e-6
 
 
+@pytest.mark.integration  # long compile: CI's second step
 def test_grad_through_a_bounded_run_matches_finite_differences():
     solver = lj.TimeTransformed(lj.Yoshida4())
 
