@@ -205,7 +205,7 @@ def simulate(
         system, y0, args, solver, _for_compiled_call(run, scan), scan
     )
     if late:
-        raise_if_failed(trajectory, trajectory.stats["max_steps"], rtol)
+        trajectory = raise_if_failed(trajectory, trajectory.stats["max_steps"], rtol)
     return trajectory
 
 

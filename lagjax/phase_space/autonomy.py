@@ -51,11 +51,14 @@ def _traced(tree: Any) -> bool:
 
 def refuse_time_dependence(system: Any, y0: Any, args: Any) -> None:
     """Raise when `system`'s equations of motion depend on t explicitly."""
-    if not jax.tree_util.tree_leaves(y0) or _traced(args):
+    if not jax.tree_util.tree_leaves(y0) or _traced(args) or _traced(system):
         return
     if _traced(y0):  # under vmap: probe at rest, and beside it
         y0 = jax.tree_util.tree_map(lambda x: np.zeros(x.shape, x.dtype), y0)
-    change, size = (np.asarray(v) for v in _rate_changes(system, y0, args))
+    measured = _rate_changes(system, y0, args)
+    if _traced(measured):  # inside the caller's own jit: nothing concrete to judge
+        return
+    change, size = (np.asarray(v) for v in measured)
     if not (np.isfinite(change) and change > _RELATIVE_CHANGE * size):
         return
     raise ValueError(

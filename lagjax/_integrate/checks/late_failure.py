@@ -55,17 +55,30 @@ def _max_steps_message(trajectory: Any, max_steps: Any, rtol: float) -> str:
     )
 
 
-def raise_if_failed(trajectory: Any, max_steps: Any, rtol: float) -> None:
-    """Raise `SimulationError` when a concrete adaptive run did not succeed."""
+def raise_if_failed(trajectory: Any, max_steps: Any, rtol: float) -> Any:
+    """Raise `SimulationError` when a concrete adaptive run did not succeed; return
+    the trajectory. Inside a caller's own `jit` (concrete inputs closed over, traced
+    outputs) nothing can be raised now: the failure is attached to the trajectory
+    as diffrax's run-time error (`eqx.error_if`), as a traced run does."""
     succeeded = trajectory.run_stats.get("succeeded")
+    if isinstance(succeeded, jax.core.Tracer):
+        trajectory = eqx.error_if(
+            trajectory, ~trajectory.run_stats["finite"], NON_FINITE_MESSAGE
+        )
+        return trajectory.result.error_if(trajectory, ~succeeded)
     if succeeded is not None and bool(np.asarray(succeeded)):
-        return
+        return trajectory
     result = trajectory.result
-    if result == diffrax.RESULTS.successful or result == diffrax.RESULTS.event_occurred:
-        return
+    finite = bool(np.asarray(trajectory.run_stats.get("finite", True)))
+    ended = (
+        result == diffrax.RESULTS.successful or result == diffrax.RESULTS.event_occurred
+    )
+    if ended and finite:
+        return trajectory
+    # out of steps first: the saves not reached are NaN, not a failure of their own
     if result == diffrax.RESULTS.max_steps_reached:
         message = _max_steps_message(trajectory, max_steps, rtol)
-    elif result == diffrax.RESULTS.nonfinite:
+    elif not finite or result == diffrax.RESULTS.nonfinite:
         message = NON_FINITE_MESSAGE
     elif result == diffrax.RESULTS.nonlinear_divergence and np.isfinite(
         np.asarray(trajectory.stats.get("energy_drift", np.nan))

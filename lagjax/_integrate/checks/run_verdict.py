@@ -155,7 +155,8 @@ def judge_run(
         stats["energy_drift"] = drift
     # computed in the compiled run, so a concrete caller reads it without an
     # eager comparison of result codes (a compilation of its own)
-    stats["succeeded"] = (result == diffrax.RESULTS.successful) | (
-        result == diffrax.RESULTS.event_occurred
+    stats["succeeded"] = finite & (
+        (result == diffrax.RESULTS.successful)
+        | (result == diffrax.RESULTS.event_occurred)
     )
     return ys, result, stats
