@@ -1,5 +1,7 @@
 """Comparison helpers shared by the tests."""
 
+import contextlib
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -42,3 +44,19 @@ def assert_singular_verdicts(lagrangian, q, qdot, match: str) -> None:
     checked = jax.jit(lambda a, b: lagrangian.acceleration(a, b, check=True))
     with pytest.raises(Exception, match=match):
         jax.block_until_ready(checked(q, qdot))
+
+
+@contextlib.contextmanager
+def counted_compilations():
+    """A list that receives one entry per XLA compilation inside the block."""
+    compiled = []
+
+    def listener(name, seconds, **kwargs):
+        if "backend_compile" in name:
+            compiled.append(name)
+
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        yield compiled
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)

@@ -8,35 +8,18 @@ of the same shapes compiles nothing. The runs are checked against the exact
 solution of the harmonic oscillator, q = q0 cos t + q̇0 sin t.
 """
 
-import contextlib
-
 import diffrax
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 import lagjax as lj
+from tests.helpers import counted_compilations
 
 OSCILLATOR = lj.Lagrangian(lambda q, qd: 0.5 * qd**2 - 0.5 * q**2)
 KEPLER = lj.SeparableHamiltonian(
     lambda p: 0.5 * jnp.sum(p * p), lambda q: -1.0 / jnp.sqrt(jnp.sum(q * q))
 )
-
-
-@contextlib.contextmanager
-def counted_compilations():
-    """A list that receives one entry per XLA compilation inside the block."""
-    compiled = []
-
-    def listener(name, seconds, **kwargs):
-        if "backend_compile" in name:
-            compiled.append(name)
-
-    jax.monitoring.register_event_duration_secs_listener(listener)
-    try:
-        yield compiled
-    finally:
-        jax.monitoring.unregister_event_duration_listener(listener)
 
 
 def exact(q0, qd0, t):

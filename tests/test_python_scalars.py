@@ -1,28 +1,11 @@
 """Python floats in `y0` and `args` are data, not parts of the compiled program: a
 new value compiles nothing, and the answer follows the value."""
 
-import contextlib
-
-import jax
 import jax.numpy as jnp
 import numpy as np
 
 import lagjax as lj
-
-
-@contextlib.contextmanager
-def counted_compilations():
-    compiled = []
-
-    def listener(name, seconds, **kwargs):
-        if "backend_compile" in name:
-            compiled.append(name)
-
-    jax.monitoring.register_event_duration_secs_listener(listener)
-    try:
-        yield compiled
-    finally:
-        jax.monitoring.unregister_event_duration_listener(listener)
+from tests.helpers import counted_compilations
 
 
 def pendulum(theta, theta_dot, t, args):
