@@ -161,6 +161,10 @@ def _free_port() -> int:
         return probe.getsockname()[1]
 
 
+# Passes alone (about 10 s) but failed once of four runs inside the full parallel
+# suite: Gloo's connection between the two local processes ("Rank 0 is connected
+# to 1 peer ranks") raced with the other pytest worker. Run it with -m slow.
+@pytest.mark.slow
 def test_two_processes_give_the_one_process_sweep_bit_for_bit(tmp_path):
     env = dict(os.environ, JAX_PLATFORMS="cpu", PYTHONPATH=str(ROOT))
     port = str(_free_port())
