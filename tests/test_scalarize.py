@@ -41,6 +41,34 @@ def test_scalar_twin_matches_values():
     assert relative_close(value, vector_style(q, qd), 1e-14)
 
 
+def test_unstack_from_unpacking_is_scalarized():
+    """JAX ≥ 0.11 lowers `a, b = q` to `unstack`; the scalar path must keep it."""
+    from jax._src.lax.lax import unstack  # the primitive itself, on any JAX
+
+    def unpacked(q, qd):
+        a, b = unstack(q, 0)
+        wa, wb = unstack(qd, 0)
+        return wa**2 + 0.5 * wb**2 + wa * wb * jnp.cos(a - b) + 2 * jnp.cos(a)
+
+    q, qd = jnp.array([0.5, 0.3]), jnp.array([0.1, -0.2])
+    twin = scalarize(unpacked, q, qd)
+    assert twin is not None
+    value = twin(as_object_array(q), as_object_array(qd))
+    assert relative_close(value, unpacked(q, qd), 1e-14)
+    acceleration = lj.Lagrangian(unpacked).acceleration(q, qd)
+    reference = lj.Lagrangian(vector_free_double_pendulum).acceleration(q, qd)
+    assert relative_close(acceleration, reference, 1e-13)
+
+
+def vector_free_double_pendulum(q, qd):
+    return (
+        qd[0] ** 2
+        + 0.5 * qd[1] ** 2
+        + qd[0] * qd[1] * jnp.cos(q[0] - q[1])
+        + 2 * jnp.cos(q[0])
+    )
+
+
 def test_unsupported_primitive_falls_back():
     assert scalarize(lambda q: jnp.sort(q)[0], jnp.ones(3)) is None
     assert scalarize(lambda q: jnp.sum(q**2), jnp.ones(500)) is None

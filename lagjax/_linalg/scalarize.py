@@ -116,8 +116,11 @@ _STRUCTURAL = frozenset(
         "squeeze",
         "stack",
         "transpose",
+        "unstack",  # JAX ≥ 0.11 unpacks an array (`a, b = q`) with it
     ]
 )
+# Structural primitives with several outputs.
+_MULTIPLE = frozenset({"split", "unstack"})
 _CUMULATIVE = {
     "cumsum": lax.add,
     "cumprod": lax.mul,
@@ -257,6 +260,10 @@ def _structural(eqn: Any, operands: list[np.ndarray]) -> Any:
     if name == "split":
         bounds = np.cumsum(params["sizes"])[:-1]
         return np.split(operands[0], bounds, axis=params["axis"])
+    if name == "unstack":
+        axis = params["axis"]
+        parts = np.split(operands[0], operands[0].shape[axis], axis=axis)
+        return [np.squeeze(part, axis=axis) for part in parts]  # arrays, even 0-d
     if name == "dot_general":
         return _dot_general(operands[0], operands[1], params["dimension_numbers"])
     if name in _CUMULATIVE:
@@ -280,7 +287,7 @@ def _scalar_rule(eqn: Any, operands: list[np.ndarray]) -> list[np.ndarray]:
             results = [_to_objects(np.asarray(eqn.primitive.bind(**eqn.params)))]
     else:
         results = _structural(eqn, operands)
-        results = results if name == "split" else [results]
+        results = results if name in _MULTIPLE else [results]
     return [np.asarray(value, dtype=object) for value in results]
 
 

@@ -263,6 +263,7 @@ _LINEAR = frozenset(
         "imag",
         "conj",
         "split",
+        "unstack",
     ]
 )
 _PRODUCT = frozenset({"mul", "dot_general"})
