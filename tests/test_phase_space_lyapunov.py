@@ -33,14 +33,16 @@ def test_chaotic_henon_heiles_orbit_has_paired_spectrum_summing_to_zero():
     states = henon_heiles_section_states(1 / 6, [-0.1], [0.0])
     y0 = jax.tree_util.tree_map(lambda x: jnp.asarray(x[0]), states)
     spectrum = lj.lyapunov_spectrum(
-        henon_heiles(), y0, 500.0, dt=0.05, solver=lj.Yoshida4(),
+        henon_heiles(), y0, 1000.0, dt=0.05, solver=lj.Yoshida4(),
         renormalize_every=0.5,
     )  # fmt: skip
     largest, second, third, smallest = np.asarray(spectrum.exponents)
     assert largest > 0.05  # chaotic (≈0.15 over this short horizon)
     assert largest >= second >= third >= smallest
     # Two near-zero exponents (along the flow and across the energy shell) and a
-    # ± pair; over t = 500 the pairing holds to O(1/t).
+    # ± pair; both hold to O(1/t) — about 4/t for this orbit, so t = 1000 leaves
+    # room for round-off, which on a chaotic orbit changes which part of the sea is
+    # sampled (t = 500 gave 0.008 on jax 0.10 and 0.0101 on jax 0.11).
     assert abs(second) < 0.01 and abs(third) < 0.01
     assert abs(largest + smallest) < 0.01
     assert np.max(np.abs(spectrum.running.sum(axis=1))) < 1e-12
