@@ -287,6 +287,7 @@ def test_principal_function_is_w_minus_alpha_t():
     assert relative_close(total, expected[-1], 1e-11)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_action_between_oscillator_closed_form_and_momenta():
     """S(q₀, q₁, T) and its gradients (reverse mode through the shooting)."""
     q0, q1 = 0.3, -0.2
@@ -307,6 +308,7 @@ def rescaled_pendulum(q, q_prime, tau, duration):
     return duration * (0.5 * velocity**2 + 9.81 * jnp.cos(q))
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_hamilton_jacobi_equation_for_a_pendulum():
     """∂S/∂q₁ = p₁ of the shot path, ∂S/∂q₀ = −p₀ and ∂S/∂t₁ + H₁ = 0 (eq. 6.67–6.68).
 

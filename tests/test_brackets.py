@@ -197,6 +197,7 @@ def hand_written_field(t, q, p):
     return p / MASS, force
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_time_derivative_along_trajectory_is_bracket_plus_partial_t():
     bracket_with_h = poisson_bracket(observable, driven_hamiltonian)
     partial_t = jax.grad(observable, argnums=2)

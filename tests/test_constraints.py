@@ -8,6 +8,7 @@ constraint force (string tension, rope tension, the wire's normal force).
 import diffrax
 import jax
 import jax.numpy as jnp
+import pytest
 
 import lagjax as lj
 from lagjax.mechanics.constraints import Constraints
@@ -54,6 +55,7 @@ def test_pendulum_acceleration_and_tension_at_a_state():
     assert relative_close(force, -tension * q / LENGTH, 1e-14)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_cartesian_pendulum_matches_angle_formulation_with_tension():
     cartesian = CartesianPendulum(mass=MASS, length=LENGTH, gravity=GRAVITY)
     angle = SimplePendulum(
@@ -121,6 +123,7 @@ def test_atwood_machine_tension_and_acceleration():
     assert relative_close(lag.constraint_force(*y0), [-tension, -tension], 1e-14)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_atwood_scene_follows_the_parabola():
     scene = CartesianAtwoodMachine(initial_velocity=0.4)
     run = lj.simulate(scene, scene.initial_state(), t1=0.5, dt=0.01)  # default solver
@@ -145,6 +148,7 @@ def test_bead_on_rotating_wire_in_cartesian_coordinates():
     assert abs(float(q[0] * jnp.sin(omega * t1) - q[1] * jnp.cos(omega * t1))) < 1e-15
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_vmap_over_scene_parameters_and_states():
     lengths = jnp.array([0.5, 1.0, 2.0])
     scenes = jax.vmap(lambda length: CartesianPendulum(length=length))(lengths)

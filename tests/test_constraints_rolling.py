@@ -8,6 +8,7 @@ a rolling contact does no work) and the contact point at rest.
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import lagjax as lj
 from lagjax.scenes.constrained import RollingDisk, _contact_point_velocity
@@ -49,6 +50,7 @@ def start_multipliers(disk):
     return disk.system().multipliers(*disk.initial_state(), 0.0, disk)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_friction_force_of_steady_rolling():
     """λ is the horizontal contact force: in steady rolling, the centripetal one.
 
@@ -75,6 +77,7 @@ def roll(disk):
     )
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_steady_and_nutating_rolling():
     as_numpy = lambda out: jax.tree_util.tree_map(np.asarray, out)
     steady = as_numpy(roll(steady_disk()))  # a steady circle

@@ -120,6 +120,7 @@ def off_grid_error(system, y0, solver, dt, exact) -> float:
     )
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 @pytest.mark.parametrize(
     "name", [pytest.param(name, marks=case[4:]) for name, case in CASES.items()]
 )

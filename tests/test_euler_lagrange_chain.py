@@ -73,6 +73,7 @@ def test_indefinite_mass_matrix_with_zero_leading_minor_is_solved(n):
     assert relative_close(traced, expected, 1e-12)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 @pytest.mark.parametrize("n", [2, 5, 8])
 def test_singular_mass_matrix_raises_or_is_nan_under_a_trace(n):
     mass = indefinite_mass(n)

@@ -4,6 +4,7 @@ on the dense output to the method's accuracy — against closed forms."""
 import diffrax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import lagjax as lj
 from lagjax.scenes.central import KeplerCartesian
@@ -22,6 +23,7 @@ def quarter_period() -> float:
     return float(complete_elliptic_k(jnp.asarray(np.sin(THETA0 / 2) ** 2)))
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_pendulum_quarter_period_with_yoshida6_to_1e_9():
     run = lj.simulate(
         PENDULUM, (THETA0, 0.0), t1=3.0, dt=0.01, solver=lj.Yoshida6(),
@@ -67,6 +69,7 @@ def radial_velocity(t, y, args, **kwargs):
     return jnp.dot(q, p)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_kepler_apoapsis_and_periapsis_passages():
     """From periapsis the radial velocity r·ṙ turns negative at apoapsis, T/2, and
     positive again at the next periapsis, T (Kepler's third law for T)."""

@@ -12,6 +12,7 @@ import diffrax
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import lagjax as lj
 from tests.helpers import counted_compilations
@@ -26,6 +27,7 @@ def exact(q0, qd0, t):
     return q0 * np.cos(t) + qd0 * np.sin(t)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_first_call_compiles_no_more_than_diffeqsolve():
     solver = diffrax.Tsit5()
     controller = diffrax.PIDController(rtol=1e-10, atol=1e-10)

@@ -191,6 +191,7 @@ def test_symplecticity_check_rejects_a_non_symplectic_method():
     assert defect > 1e-4
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_forward_mode_jacobian_through_diffeqsolve_matches_finite_differences():
     """The user's path: jacfwd of a whole solve (diffrax's ForwardMode adjoint), with
     optimistix differentiating the stage equations implicitly at every step."""

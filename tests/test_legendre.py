@@ -44,6 +44,7 @@ def test_round_trip_double_pendulum(quadratic):
         assert relative_close(ham.velocity(q, p), qd, 1e-11)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_round_trip_relativistic_newton():
     args = (1.3, 2.0, 0.7)
     lag = lj.Lagrangian(relativistic)
@@ -102,6 +103,7 @@ def test_dissipation_enters_legendre_vector_field():
     assert np.isclose(dp, -3.0 * 0.3 - 0.4 * -1.1)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_velocity_from_momentum_of_a_five_link_chain():
     # Five coordinates: the quadratic inverse in scalars with the unrolled LDLᵀ.
     # Closed form: p = M(q) q̇, M_ij = (n − max(i, j)) cos(θ_i − θ_j).

@@ -65,6 +65,7 @@ def _check_against_finite_differences(loss, net):
         np.testing.assert_allclose(gradient[index], expected, rtol=1e-6, atol=1e-12)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 @pytest.mark.parametrize(
     "make_system, options",
     [
@@ -144,6 +145,7 @@ def _bob_positions(model, ts):
     return jnp.stack([model.length * jnp.sin(run.q), -model.length * jnp.cos(run.q)])
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_training_recovers_pendulum_gravity_and_length():
     ts = jnp.linspace(0.0, 2.0, 41)
     truth = jnp.array([9.81, 1.0])

@@ -263,6 +263,7 @@ def test_hundred_bodies_under_softened_gravity():
     assert float(np.max(np.abs(energy - energy[0]))) < 1e-8 * abs(float(energy[0]))
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_hundred_bodies_in_a_trap_move_their_centre_like_one_body():
     """In U = ½k m|r|² the internal forces cancel from the centre of mass, which moves
     as one body of mass M in the same trap (eq. 2.7) — with a splitting method, step

@@ -10,6 +10,7 @@ from lagjax.special_functions import complete_elliptic_k
 PENDULUM = lj.SeparableHamiltonian(lambda p: 0.5 * p**2, lambda q: -jnp.cos(q))
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_pendulum_libration_frequency_matches_the_elliptic_integral():
     theta0 = 1.0
     # ω = π ω0 / (2 K(k²)), k = sin(θ0/2), ω0 = 1.

@@ -80,6 +80,7 @@ def _assert_float32_run_tracks_float64(wide, narrow, label):
     assert deviation < 1e3 * EPS32, (label, deviation)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 @pytest.mark.parametrize(
     "name",
     [
@@ -134,6 +135,7 @@ def test_nonholonomic_run_in_float32():
     _assert_float32_run_tracks_float64(wide, narrow, "knife edge")
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 @pytest.mark.parametrize(
     "solver",
     [

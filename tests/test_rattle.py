@@ -75,6 +75,7 @@ def rattle_final_state(dt):
     return jax.tree_util.tree_map(lambda x: x[-1], solution.ys)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_second_order_convergence_on_the_cartesian_double_pendulum():
     angles = lj.Lagrangian(angle_double_pendulum, quadratic_in_velocity=True)
     reference = lj.simulate(angles, START, t1=1.0, dt=0.002, solver=diffrax.Dopri8())

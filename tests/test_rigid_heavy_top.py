@@ -68,6 +68,7 @@ def _fast_top_smallness(scene):
     return scene.i1 * scene.mgl * jnp.cos(scene.theta0) / (scene.i3 * scene.spin) ** 2
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_steady_precession_slow_and_fast():
     base = HeavySymmetricTop()
     exact = jnp.stack(
@@ -150,6 +151,7 @@ GENERIC_TOP = dict(
 )
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 @pytest.mark.parametrize(
     "solver, dt, tolerance",
     [

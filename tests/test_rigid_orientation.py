@@ -62,6 +62,7 @@ def test_euler_matrix_is_the_product_of_three_turns_and_orthogonal():
     assert np.allclose(a[0, 2], last_row)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_quaternion_and_matrix_forms_agree():
     q = jax.vmap(euler_zxz_to_quaternion)(ANGLES)
     assert np.allclose(jnp.linalg.norm(q, axis=-1), 1.0)

@@ -139,6 +139,7 @@ def _earth_checks_within(earth, trajectory, period_tolerance):
     assert relative_close(*checks["angular momentum"], 1e-12)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_earth_free_precession_two_ways():
     """Over 400 days: Euler angles with the default GaussLegendre(2), h = 20 min
     (ωh = 0.09, period to ~3e-5), and quaternions with Dopri8 (the body-frame

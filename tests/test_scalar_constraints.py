@@ -123,6 +123,7 @@ def test_singular_mass_matrix_is_named_with_constraints():
     assert bool(jnp.all(jnp.isnan(jax.jit(lag.acceleration)(q, qdot))))
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_derivatives_of_the_constrained_acceleration_are_finite_differences():
     lag = lj.Lagrangian(cartesian_double_pendulum, constraints=rods)
 

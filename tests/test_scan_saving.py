@@ -44,6 +44,7 @@ def assert_same_run(scan, loop, atol):
         assert np.all(np.isinf(a[~used]))
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 @pytest.mark.parametrize(
     "system, solver",
     [

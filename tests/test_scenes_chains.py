@@ -9,6 +9,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import lagjax as lj
 from lagjax.scenes.chains import (
@@ -107,6 +108,7 @@ def test_co2_motion_started_in_a_mode_stays_in_it():
     assert np.max(np.abs(measured - exact)) < 1e-8 * np.max(np.abs(exact))
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_spring_chain_modes_and_exact_motion():
     scene = SpringChain()
     omegas, modes, (kinetic, _) = as_numpy(autodiff_small_oscillations(scene))

@@ -90,6 +90,7 @@ def relative_error(measured, expected, scale):
     return float(np.max(np.abs(np.asarray(measured) - np.asarray(expected))) / scale)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 @pytest.mark.parametrize("name", CHARGE_CASES)
 def test_charge_checks_pass(name):
     scenes, _, checks = charge_runs()

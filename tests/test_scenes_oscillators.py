@@ -118,6 +118,7 @@ def test_harmonic_oscillator_exact_solution_and_action_angle_over_a_sweep():
     assert np.isclose(turned[2], np.mod(30.0, 2 * np.pi), rtol=1e-9, atol=0)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_coupled_oscillators_general_and_diagonal_stiffness():
     general = CoupledOscillators()
     diagonal = CoupledOscillators(stiffness=(1.0, 4.0, 9.0))
@@ -141,6 +142,7 @@ def test_coupled_oscillators_reject_mismatched_stiffness():
         CoupledOscillators(masses=(1.0, 2.0), stiffness=np.eye(3))
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_driven_oscillator_transient_and_steady_state():
     # Adaptive Dopri8 at rtol = 1e-12 over 60 s = 14 drive periods; the response
     # is fitted after the transient has decayed by e^{-20}. t1 is traced so that

@@ -151,6 +151,7 @@ def double_pendulum_run(scene, start, t1=100.0):
     return run_saved(scene, start, solver, 0.0025, t1, round(10 * t1) + 1)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_double_pendulum_small_oscillation_frequencies_from_a_trajectory():
     # θ₁ = 1e-5 rad excites both modes. The amplitude lowers the frequencies by
     # O(θ²): the fit below measured 6e-13 and 4.5e-11 (4.5e-9 for the fast mode

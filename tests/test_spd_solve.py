@@ -217,6 +217,7 @@ def _unrolled(m, b):
     return solve_unrolled_symmetric(upper, [b[i] for i in range(n)])
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_unrolled_form_exact_in_a_mixed_batch_with_nan_free_gradients():
     rng = np.random.default_rng(5)
     n = 5
@@ -271,6 +272,7 @@ FACTORIZATIONS = [
 ]
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 @pytest.mark.parametrize("n, members, on_cpu", FACTORIZATIONS)
 def test_factorizations_per_backend(n, members, on_cpu):
     # Up to 16 coordinates the dense formulation factors by XLA loops. Above,

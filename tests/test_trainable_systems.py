@@ -53,6 +53,7 @@ def _separable(potential):
     return lj.SeparableHamiltonian(_kinetic, potential)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 @pytest.mark.parametrize(
     "make_system, options",
     [
@@ -83,6 +84,7 @@ def _stiffness_of(model):
     return model.potential.stiffness
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_lagrangian_module_gradient_and_parameter_recovery():
     # A pendulum-like anharmonic oscillator: learn the stiffness from its own
     # trajectory by Gauss-Newton-free gradient descent on a 1-D quadratic bowl.

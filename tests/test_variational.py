@@ -4,6 +4,7 @@ import diffrax
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import lagjax as lj
 from lagjax._core.terms import LagrangianTerm
@@ -24,6 +25,7 @@ LAG = lj.Lagrangian(double_pendulum, quadratic_in_velocity=True)
 Y0 = (jnp.array([2.0, 2.5]), jnp.zeros(2))
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_second_order_convergence_on_double_pendulum():
     reference = lj.simulate(
         LAG, Y0, t1=1.0, solver=diffrax.Dopri8(), rtol=1e-13, atol=1e-13

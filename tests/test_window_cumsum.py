@@ -87,6 +87,7 @@ def test_chain_of_24_links_solves_the_closed_form_equations():
     assert relative_close(derived, closed_form_acceleration(q, qd), 1e-10)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_parameters_through_args_are_traced_and_differentiated():
     # L scaled by a mass m from args (a traced constant of the rewritten jaxpr,
     # batched and differentiated through it): q̈ does not depend on m.
