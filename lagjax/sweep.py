@@ -8,6 +8,11 @@ devices (`lagjax._sweep.processes`). A chunk whose size does not divide the devi
 count is padded (with copies of its last member) and the padding dropped from the
 result. Large batches are processed in chunks of `chunk_size`, so memory stays
 bounded by one chunk; `lj.sweep_to_disk` streams the chunks to a directory.
+
+Refused by name before anything is compiled: a batch of 0 members, a leaf without
+a batch axis, batch inputs of different leading sizes, a chunk size that is not a
+positive integer, an empty, foreign or repeated device list, and inputs whose
+shapes do not fit the system (one member's `simulate` is traced, not run, first).
 """
 
 from __future__ import annotations
@@ -36,13 +41,16 @@ _AXIS = "batch"
 
 def batch_size(y0s: Any, args_batch: Any) -> int:
     """The common leading size of every leaf of `y0s` and `args_batch`, or a
-    refusal that names the inputs whose sizes differ."""
+    refusal that names the inputs whose sizes differ (or that have none)."""
     sizes = {}
     for name, tree in (("y0s", y0s), ("args_batch", args_batch)):
         for path, leaf in jax.tree_util.tree_leaves_with_path(tree):
             if not np.shape(leaf):
                 raise ValueError(
-                    f"{name}{jax.tree_util.keystr(path)} has no batch axis"
+                    f"{name}{jax.tree_util.keystr(path)} has no batch axis (it is a "
+                    "scalar): every leaf of y0s and args_batch needs a leading axis "
+                    "over the members — broadcast it (jnp.full(n, value)), or pass a "
+                    "parameter shared by all members as args=…"
                 )
             sizes[name + jax.tree_util.keystr(path)] = int(np.shape(leaf)[0])
     if not sizes:
@@ -51,17 +59,59 @@ def batch_size(y0s: Any, args_batch: Any) -> int:
         raise ValueError(
             "every batched input needs the same leading size, got "
             + ", ".join(f"{name}: {size}" for name, size in sizes.items())
+            + ": give every leaf one entry per member"
         )
-    return next(iter(sizes.values()))
+    size = next(iter(sizes.values()))
+    if size == 0:
+        raise ValueError(
+            f"the batch has 0 members ({next(iter(sizes))} has leading size 0): "
+            "give at least one member"
+        )
+    return size
 
 
 def check_chunk_size(chunk_size: Any) -> None:
     if chunk_size is None:
         return
+    remedy = "e.g. chunk_size=4096, or None for the whole batch at once"
     if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)):
-        raise TypeError(f"chunk_size must be a positive integer, got {chunk_size!r}")
+        raise TypeError(
+            f"chunk_size must be a positive integer, got {chunk_size!r}: {remedy}"
+        )
     if chunk_size < 1:
-        raise ValueError(f"chunk_size must be a positive integer, got {chunk_size}")
+        raise ValueError(
+            f"chunk_size must be a positive integer, got {chunk_size}: {remedy}"
+        )
+
+
+def checked_devices(devices: Sequence[Any] | None) -> list[Any]:
+    """`devices` as a list of distinct devices of this process (default: all of
+    them), or a refusal naming what is wrong with the list."""
+    if devices is None:
+        return list(jax.local_devices())
+    if isinstance(devices, (str, bytes)) or not isinstance(devices, Sequence):
+        raise TypeError(
+            f"devices must be a list of JAX devices, got {devices!r}: pass "
+            "devices=None for this process's devices, or e.g. jax.local_devices()[:2]"
+        )
+    devices = list(devices)
+    if not devices:
+        raise ValueError(
+            "devices=[] holds no device to run on: pass devices=None for this "
+            "process's devices (jax.local_devices()), or a non-empty list of them"
+        )
+    local = jax.local_devices()
+    for device in devices:
+        if device not in local:
+            raise ValueError(
+                f"devices holds {device!r}, which is not a device of this process: "
+                f"choose from jax.local_devices() = {local}"
+            )
+    if len(set(devices)) != len(devices):
+        raise ValueError(
+            f"devices lists a device more than once ({devices}): list each once"
+        )
+    return devices
 
 
 def _pad(tree: Any, size: int) -> Any:
@@ -82,6 +132,10 @@ def _take(tree: Any, start: int, stop: int) -> Any:
     return jax.tree_util.tree_map(lambda leaf: leaf[start:stop], tree)
 
 
+def _first_member(tree: Any) -> Any:
+    return jax.tree_util.tree_map(lambda leaf: leaf[0], tree)
+
+
 @eqx.filter_jit
 def _simulate_members(system, shared_args, simulate_kwargs, members):
     """vmap of `simulate` over (y0, args) members; compiled once per configuration
@@ -94,6 +148,32 @@ def _simulate_members(system, shared_args, simulate_kwargs, members):
         )
 
     return jax.vmap(one)(members)
+
+
+def _check_a_member_runs(
+    system: System, shared_args: Any, simulate_kwargs: dict[str, Any], member: Any
+) -> None:
+    """Trace one member's `simulate` (no compilation, no integration), so that
+    inputs whose shapes do not fit the system are refused before any chunk runs
+    and before a directory is touched."""
+    y0, args = member
+    try:
+        jax.eval_shape(
+            lambda y0, args: simulate(
+                system,
+                y0,
+                args=shared_args if args is None else args,
+                **simulate_kwargs,
+            ),
+            y0,
+            args,
+        )
+    except (ValueError, TypeError) as error:
+        shapes = jax.tree_util.tree_map(np.shape, member)
+        raise type(error)(
+            f"the sweep's members cannot run (one member's (y0, args) shapes: "
+            f"{shapes}): {error}"
+        ) from None
 
 
 class ChunkedRun(NamedTuple):
@@ -118,11 +198,12 @@ def chunked_run(
     """Check the batch and prepare the chunks of a sweep over this process's
     `devices` (default: its local devices)."""
     check_chunk_size(chunk_size)
-    devices = list(jax.local_devices() if devices is None else devices)
+    devices = checked_devices(devices)
     simulate_kwargs = dict(simulate_kwargs)
     shared_args = simulate_kwargs.pop("args", None)
     batched = (y0s, args_batch)
     size = batch_size(y0s, args_batch)
+    _check_a_member_runs(system, shared_args, simulate_kwargs, _first_member(batched))
     step = len(devices) * math.ceil((chunk_size or size) / len(devices))
     mesh = Mesh(np.array(devices), (_AXIS,))
     sharding = NamedSharding(mesh, PartitionSpec(_AXIS))

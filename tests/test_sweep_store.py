@@ -140,6 +140,49 @@ def test_bad_inputs_are_refused_by_name_before_any_work(tmp_path):
     assert not (tmp_path / "out").exists()
 
 
+def test_empty_scalar_or_misshapen_batches_and_bad_devices_are_refused(tmp_path):
+    system, (q0s, p0s), omegas = problem()
+    empty = jnp.zeros(0)
+    _refuses(tmp_path, "the batch has 0 members", y0s=(empty, empty), omegas=empty)
+    _refuses(tmp_path, r"y0s\[1\] has no batch axis .*jnp.full", y0s=(q0s, 0.0))
+    _refuses(tmp_path, r"args_batch has no batch axis", omegas=1.5)
+    # Shapes that do not fit the system: found by tracing one member, before the
+    # directory is made (one entry per member, but two frequencies each).
+    _refuses(
+        tmp_path, "members cannot run .* V must return a scalar",
+        omegas=jnp.ones((MEMBERS, 2)),
+    )  # fmt: skip
+    _refuses(tmp_path, r"devices=\[\] holds no device", devices=[])
+    _refuses(tmp_path, "not a device of this process", devices=["cpu"])
+    device = jax.local_devices()[0]
+    _refuses(tmp_path, "more than once", devices=[device, device])
+    _refuses(tmp_path, "a list of JAX devices", devices=device)
+    _refuses(
+        tmp_path, "attributes must hold JSON values", attributes={"a": jnp.ones(2)}
+    )
+    a_file = tmp_path / "a_file"
+    a_file.write_text("not a directory")
+    _refuses(tmp_path, "is a file, not a directory", out_dir=a_file)
+    for refused in (dict(devices=[]), dict(chunk_size=-1), dict(y0s=(empty, empty))):
+        call = dict(y0s=(q0s, p0s), omegas=omegas, **OPTIONS)
+        call.update(refused)
+        with pytest.raises(ValueError):
+            lj.sweep(system, call.pop("y0s"), call.pop("omegas"), **call)
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes to a read-only directory")
+def test_a_read_only_directory_is_refused(tmp_path):
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o500)
+    try:
+        _refuses(tmp_path, "is not writable", out_dir=locked / "out")
+        _refuses(tmp_path, "is not writable", out_dir=locked)
+    finally:
+        locked.chmod(0o700)
+
+
 def test_a_directory_holding_another_sweep_is_refused_untouched(tmp_path):
     system, y0s, omegas = problem()
     out = tmp_path / "out"

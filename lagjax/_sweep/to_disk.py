@@ -1,16 +1,19 @@
 """`sweep_to_disk`: a sweep whose results survive — streamed to a directory chunk
 by chunk, resumed after a crash, shared among JAX's processes.
 
-Every refusal comes before any integration: a chunk size that is not a positive
-integer, batch inputs of different sizes, a directory that cannot be written, one
-that holds other files or another sweep's chunks (fingerprint,
-`lagjax._sweep.fingerprint`), or the same sweep cut into other chunks. Members run
+Every refusal comes before any integration, and all but the directory's own before
+the directory is touched: the batch's (`lagjax.sweep.chunked_run`: no members, no
+batch axis, sizes or shapes that do not fit, chunk size, devices), a path that is a
+file or cannot be written, a directory that holds other files or another sweep's
+chunks (fingerprint, `lagjax._sweep.fingerprint`), or the same sweep cut into
+other chunks. Members run
 with `throw=False`: a failing member is marked by its `RESULTS` code and the others
 are kept.
 """
 
 from __future__ import annotations
 
+import json
 import os
 import socket
 from collections.abc import Callable, Sequence
@@ -41,18 +44,29 @@ DEFAULT_CHUNK_SIZE = 4096
 
 
 def _writable_directory(out_dir: Path, tag: str) -> None:
+    if out_dir.exists() and not out_dir.is_dir():
+        raise ValueError(
+            f"out_dir {str(out_dir)!r} is a file, not a directory: give the path of "
+            "a new or empty directory"
+        )
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
         probe = out_dir / f".write-probe-{tag}"
         probe.write_bytes(b"")
         probe.unlink()
     except OSError as error:
-        raise ValueError(f"out_dir {str(out_dir)!r} is not writable: {error}") from None
+        raise ValueError(
+            f"out_dir {str(out_dir)!r} is not writable ({error.strerror or error}): "
+            "give a directory you can create and write to"
+        ) from None
 
 
-def _new_index(fingerprint: str, parameters: dict, chunks: ChunkedRun) -> dict:
+def _new_index(
+    fingerprint: str, parameters: dict, chunks: ChunkedRun, attributes: dict
+) -> dict:
     return {
         "format": FORMAT,
+        "attributes": attributes,
         "fingerprint": fingerprint,
         "members": chunks.size,
         "chunk_size": chunks.step,
@@ -67,7 +81,12 @@ def _new_index(fingerprint: str, parameters: dict, chunks: ChunkedRun) -> dict:
 
 
 def _open_directory(
-    out_dir: Path, fingerprint: str, parameters: dict, chunks: ChunkedRun, tag: str
+    out_dir: Path,
+    fingerprint: str,
+    parameters: dict,
+    chunks: ChunkedRun,
+    attributes: dict,
+    tag: str,
 ) -> dict[str, Any]:
     """The directory's index, after refusing anything but this sweep's own."""
     _writable_directory(out_dir, tag)
@@ -79,7 +98,7 @@ def _open_directory(
                 f"out_dir {str(out_dir)!r} holds files but no sweep index "
                 f"({', '.join(others[:5])}): give a new or empty directory"
             )
-        index = _new_index(fingerprint, parameters, chunks)
+        index = _new_index(fingerprint, parameters, chunks, attributes)
         write_index(out_dir, index, tag)
         return index
     if index.get("format") != FORMAT or index.get("fingerprint") != fingerprint:
@@ -95,6 +114,23 @@ def _open_directory(
             f"chunk_size={index['chunk_size']} to resume it"
         )
     return index
+
+
+def _json_ready(attributes: Any) -> dict[str, Any]:
+    if attributes is None:
+        return {}
+    if not isinstance(attributes, dict):
+        raise TypeError(
+            f"attributes must be a dict of JSON values, got {type(attributes).__name__}"
+        )
+    try:
+        json.dumps(attributes)
+    except (TypeError, ValueError) as error:
+        raise TypeError(
+            f"attributes must hold JSON values only ({error}): convert arrays with "
+            ".tolist()"
+        ) from None
+    return attributes
 
 
 def _record(out_dir: Path, index: dict, done: dict[int, dict], tag: str) -> None:
@@ -114,6 +150,7 @@ def sweep_to_disk(
     chunk_size: int | None = DEFAULT_CHUNK_SIZE,
     devices: Sequence[Any] | None = None,
     progress: bool | Callable[[SweepProgress], Any] = False,
+    attributes: dict[str, Any] | None = None,
     **simulate_kwargs: Any,
 ) -> SweepStore:
     """`lj.sweep`, streamed to `out_dir` in chunks that survive the process.
@@ -125,6 +162,9 @@ def sweep_to_disk(
       count); default 4096. A resumed sweep needs the same.
     - `progress`: True prints a line per chunk (members done, rate, time left); a
       callable receives a `SweepProgress` per chunk.
+    - `attributes`: the caller's notes on the sweep, JSON-ready (what each member
+      is, say: `lagjax sweep` records its grid), kept in `index.json` as written
+      by the call that created the directory.
     - `simulate_kwargs`: passed to `simulate`, which runs with `throw=False`.
 
     After `jax.distributed.initialize()` every process writes its share of the chunks
@@ -139,12 +179,13 @@ def sweep_to_disk(
             "raising: leave out throw=True"
         )
     simulate_kwargs["throw"] = False
+    attributes = _json_ready(attributes)
     chunks = chunked_run(system, y0s, args_batch, chunk_size, devices, simulate_kwargs)
     parameters, fingerprint = describe_sweep(system, y0s, args_batch, simulate_kwargs)
     parameters["chunk_size"] = chunk_size
     out_dir = Path(out_dir)
     tag = f"{socket.gethostname()}-p{jax.process_index()}"
-    index = _open_directory(out_dir, fingerprint, parameters, chunks, tag)
+    index = _open_directory(out_dir, fingerprint, parameters, chunks, attributes, tag)
     remove_own_leftovers(out_dir, tag)
     done = completed_chunks(out_dir)
     mine = chunks_of_this_process(
