@@ -36,6 +36,7 @@ from lagjax._core.cpu_loops import enable_fast_cpu_loops
 from lagjax._integrate.checks.inputs import check_times
 from lagjax._integrate.solver_choice import default_solver
 from lagjax.cli.run import Outcome, UsageError, first_line, run_scene
+from lagjax.cli.sweep import add_sweep_command
 from lagjax.solvers.implicit import (
     AbstractGaussLegendre,
     GaussLegendre,
@@ -364,6 +365,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     bench.add_argument("--quick", action="store_true")
     bench.set_defaults(handler=_command_bench)
+    add_sweep_command(commands, SOLVERS)
     return parser
 
 
