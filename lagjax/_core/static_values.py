@@ -3,7 +3,7 @@
 `simulate` runs as one `equinox.filter_jit` call, which traces array leaves and
 hashes everything else as the call's static configuration. Some concrete arrays
 must reach the trace as values, not tracers: the fixed-step path lays out its
-nested scans in Python from the save times (`simulate._Run.saving`). A NumPy
+nested scans in Python from the save times (`lagjax._integrate.plan.RunPlan.saving`). A NumPy
 array passed in would be traced, and one closed over would not survive either:
 inside a trace every `jnp` operation on it — a `diffrax.SubSaveAt` conversion
 too — returns a tracer. A concrete `jax.Array` passes through `jnp.asarray` as it

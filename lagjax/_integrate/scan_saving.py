@@ -105,7 +105,7 @@ def scan_saving(
             schedule = off_grid_schedule(t0, t1, step, times)
             if schedule is None:
                 return None
-    # diffeqsolve's default for fixed steps (simulate._diffeqsolve).
+    # diffeqsolve's default for fixed steps (`diffeqsolve_run`).
     limit = max_steps or diffrax_step_bound(t0, t1, dt)
     assert limit is not None  # concrete times
     return ScanSaving(step, sub.t0, times, sub.steps, sub.t1, dense, limit, schedule)

@@ -17,14 +17,14 @@ Which terms and state each system gets for a solver is the system's own answer
 (`lagjax._core.system.AbstractSystem.integration`). A solver is *partitioned* when its diffrax `term_structure` is a pair of terms
 (lagjax's splitting methods and diffrax's `SemiImplicitEuler`). With `dt` the steps are
 fixed; without it the solver must be adaptive and `rtol`/`atol` control the error.
-Only the final state is saved unless `ts` (or `saveat`) asks for more. Fixed steps
-with only the final state saved, or `ts` on a uniform subgrid of the steps (and the
-default adjoint), run as plain `lax.scan`s over the solver's `step` (see
-`fixed_step.py`); everything else runs through `diffrax.diffeqsolve`. A run that
-reads states between steps (`ts` off the grid, `dense=True`, an `event`) gives a
-fixed-step solver a Hermite continuous extension (`lagjax.solvers.hermite`) for that run
-only; `Trajectory.evaluate` and event conditions see `y0`'s convention
-(`lagjax._integrate.dense_output`).
+Only the final state is saved unless `ts` (or `saveat`) asks for more. Which loop
+runs a call — lagjax's scans over the solver's `step` for plain fixed-step runs,
+`diffrax.diffeqsolve` for everything else — and how it saves is decided in one
+place, `lagjax._integrate.plan`; the loops are `scan_run` and `diffeqsolve_run`.
+A run that reads states between steps (`ts` off the grid, `dense=True`, an
+`event`) gives a fixed-step solver a Hermite continuous extension
+(`lagjax.solvers.hermite`) for that run only; `Trajectory.evaluate` and event
+conditions see `y0`'s convention (`lagjax._integrate.dense_output`).
 
 The arguments are checked in Python (`lagjax._integrate.checks.inputs`), and all the numeric
 work — casting to the working precision, flattening, the loop, the diagnosis
@@ -35,8 +35,7 @@ nothing.
 
 from __future__ import annotations
 
-import math
-from typing import Any, NamedTuple
+from typing import Any
 
 import diffrax
 import equinox as eqx
@@ -52,38 +51,27 @@ from lagjax._core.precision import (
 )
 from lagjax._core.static_values import Constant
 from lagjax._core.system import AbstractSystem
+from lagjax._integrate.checks.forward_mode import forward_mode_explained
 from lagjax._integrate.checks.inputs import check_simulate_inputs
 from lagjax._integrate.checks.late_failure import raise_if_failed
-from lagjax._integrate.checks.run_verdict import (
-    NON_FINITE_MESSAGE as _NON_FINITE_MESSAGE,
-)
 from lagjax._integrate.checks.run_verdict import judge_run
 from lagjax._integrate.dense_output import DenseSolution, UserState, event_in_user_state
-from lagjax._integrate.fixed_step_loop import (
-    fixed_step_count,
-    integrate_fixed_steps,
-    integrate_fixed_steps_saving,
-    uniform_grid_saves,
-)
+from lagjax._integrate.diffeqsolve_run import integrate_with_diffeqsolve
 from lagjax._integrate.flat_state import flattened
+from lagjax._integrate.plan import RunPlan, Saving
 from lagjax._integrate.reversible_adjoint import (
     ReversibleAdjoint,
     check_reversible_run,
 )
-from lagjax._integrate.scan_saving import ScanSaving, integrate_saving, scan_saving
+from lagjax._integrate.scan_run import integrate_on_scans
 from lagjax._integrate.solver_choice import chosen_solver
 from lagjax._integrate.step_control import (
     as_python_number,
     defaults,
-    diffrax_step_bound,
-    stepping,
     with_implicit_tolerances,
 )
 from lagjax._integrate.taylor_run import run_taylor
-from lagjax._integrate.time_grid import grid_step
 from lagjax._integrate.time_transformed_run import run_time_transformed
-from lagjax.solvers.hermite import HermiteDenseOutput, needs_hermite
-from lagjax.solvers.implicit import stage_failure_message
 from lagjax.solvers.time_transformed import TimeTransformed
 from lagjax.taylor.solver import Taylor
 from lagjax.trajectory import Trajectory
@@ -171,7 +159,8 @@ def simulate(
                                     stepsize_controller=stepsize_controller,
                                     progress_meter=progress_meter)  # fmt: skip
     t1, dt = defaults(system, t0, t1, dt, solver, stepsize_controller)
-    y0 = check_simulate_inputs(system, y0, t0, t1, dt, solver, ts, args, max_steps)
+    y0 = check_simulate_inputs(system, y0, t0, t1, dt, solver, ts, args, max_steps,
+                               rtol, atol)  # fmt: skip
     if progress and progress_meter is not None:
         raise ValueError("pass progress=True or progress_meter, not both")
     t0, t1, dt = (as_python_number(x) for x in (t0, t1, dt))
@@ -196,14 +185,15 @@ def simulate(
     # A concrete adaptive run is diagnosed after its compiled call, in one plain
     # error that keeps what was computed (`checks.late_failure`).
     late = throw and dt is None and not _traced(system, y0, args, ts)
-    run = _Run(t0, t1, dt, _save_times(ts, dtype), rtol, atol, max_steps, progress,
-               saveat, adjoint, throw and not late, dtype, dense, event,
-               stepsize_controller, progress_meter)  # fmt: skip
-    scan = run.fits_scan()
-    check_reversible_run(adjoint, solver, scan and run.saves_on_grid(), dt)
-    trajectory = _compiled_run(
-        system, y0, args, solver, _for_compiled_call(run, scan), scan
-    )
+    plan = RunPlan(t0, t1, dt, _save_times(ts, dtype), rtol, atol, max_steps,
+                   progress, saveat, adjoint, throw and not late, dtype, dense, event,
+                   stepsize_controller, progress_meter)  # fmt: skip
+    mode = plan.saving_mode()
+    check_reversible_run(adjoint, solver, mode.on_step_grid, dt)
+    with forward_mode_explained():  # jax.jacfwd through diffeqsolve: name the adjoint
+        trajectory = _compiled_run(
+            system, y0, args, solver, plan.for_compiled_call(mode), mode
+        )
     if late:
         trajectory = raise_if_failed(trajectory, trajectory.stats["max_steps"], rtol)
     return trajectory
@@ -215,7 +205,7 @@ def _traced(*trees: Any) -> bool:
 
 
 @eqx.filter_jit
-def _compiled_run(system, y0, args, solver, run: _Run, scan: bool) -> Trajectory:
+def _compiled_run(system, y0, args, solver, run: RunPlan, mode: Saving) -> Trajectory:
     """All the numeric work of a run as ONE compiled call: casting, flattening, the
     loop, and the diagnosis after it (`lagjax._integrate.checks.run_verdict.judge_run`).
 
@@ -234,7 +224,7 @@ def _compiled_run(system, y0, args, solver, run: _Run, scan: bool) -> Trajectory
         cast_floats(system, dtype),
         cast_floats(args, dtype),
     )
-    if isinstance(run.ts, Constant):  # the scan path (`_for_compiled_call`)
+    if isinstance(run.ts, Constant):  # the scan path (`RunPlan.for_compiled_call`)
         saveat: Any = run.saveat
         run = run._replace(ts=run.ts.value, saveat=saveat.value)
     elif run.ts is not None:
@@ -246,10 +236,11 @@ def _compiled_run(system, y0, args, solver, run: _Run, scan: bool) -> Trajectory
     user_state = UserState.of(flat, integrated, system)
     if run.event is not None:
         run = run._replace(event=event_in_user_state(run.event, user_state, dtype))
-    integrate = _integrate_scan if scan else _diffeqsolve
-    saved_ts, ys, stats, result, interpolation = integrate(
-        terms, solver, state0, args, run
-    )
+    if mode.on_scan:
+        integrated_run = integrate_on_scans(terms, solver, state0, args, run, mode)
+    else:
+        integrated_run = integrate_with_diffeqsolve(terms, solver, state0, args, run)
+    saved_ts, ys, stats, result, interpolation = integrated_run
     if flat is not None:
         ys = flat.unravel(ys)
     ys, result, checks = judge_run(
@@ -276,197 +267,3 @@ def _save_times(ts: Any, dtype: Any) -> Any:
     if ts is None or isinstance(ts, Tracer):
         return ts
     return np.asarray(ts, dtype=dtype)
-
-
-def _for_compiled_call(run: _Run, scan: bool) -> _Run:
-    """`run` as `_compiled_run` takes it: the scan path lays out its loops in Python
-    from the save times, so they travel as static constants
-    (`lagjax._core.static_values`)."""
-    if not scan:
-        return run
-    # Concrete even when simulate is traced (inside a user's jit, device_put is
-    # staged like any operation).
-    with jax.ensure_compile_time_eval():
-        ts = None if run.ts is None else jax.device_put(run.ts)
-    return run._replace(ts=Constant(ts), saveat=Constant(run.saveat))
-
-
-class _Run(NamedTuple):
-    """How `simulate` was asked to integrate: times, tolerances, saving, adjoint."""
-
-    t0: Any
-    t1: Any
-    dt: Any
-    ts: Any
-    rtol: float
-    atol: float
-    max_steps: int | None
-    progress: bool
-    saveat: diffrax.SaveAt | None
-    adjoint: diffrax.AbstractAdjoint | None
-    throw: bool
-    dtype: Any
-    dense: bool = False
-    event: diffrax.Event | None = None
-    controller: diffrax.AbstractStepSizeController | None = None
-    progress_meter: diffrax.AbstractProgressMeter | None = None
-
-    def fits_scan(self) -> bool:
-        """Fixed steps, default adjoint, no progress meter, step-size controller or
-        event, and a saving the scans cover (`scan_saving`): the scan path."""
-        plain = (
-            self.dt is not None
-            and (self.adjoint is None or isinstance(self.adjoint, ReversibleAdjoint))
-            and not self.progress
-            and self.event is None
-            and self.controller is None
-            and self.progress_meter is None
-            and all(isinstance(x, (int, float)) for x in (self.t0, self.t1, self.dt))
-        )
-        return plain and (self.saves_on_grid() or self.saving() is not None)
-
-    def saves_on_grid(self) -> bool:
-        """Only the final state, or `ts` on a uniform subgrid of the steps."""
-        plain = self.saveat is None and self.max_steps is None and not self.dense
-        return plain and (self.ts is None or self.save_grid() is not None)
-
-    def saving(self) -> ScanSaving | None:
-        return scan_saving(self.t0, self.t1, self.dt, self.ts, self.saveat,
-                           self.dense, self.max_steps, self.dtype)  # fmt: skip
-
-    def save_grid(self) -> tuple[int, int, int] | None:
-        """`(lead, every, saves)` of `ts` on the step grid within [t0, t1], or None
-        (traced `ts`, off the grid, or unevenly spaced)."""
-        try:
-            ts = np.asarray(self.ts, dtype=float)
-        except jax.errors.TracerArrayConversionError:
-            return None
-        grid = uniform_grid_saves(self.t0, self.dt, ts)
-        if grid is None:
-            return None
-        lead, every, saves = grid
-        if lead + every * (saves - 1) > fixed_step_count(self.t0, self.t1, self.dt):
-            return None
-        return grid
-
-
-def _integrate_scan(terms, solver, state0, args, run: _Run):
-    """The fixed-step path: `lax.scan`s over the solver's step (`fixed_step.py`).
-
-    A failed run (a failed implicit solve, a non-finite state) keeps what it
-    computed: the final-state run returns the last good state at the time it was
-    reached, a saving run its saves up to the failure, with the later ones marked
-    as diffrax marks unused slots (t = inf, states inf).
-    """
-    step = grid_step(run.t0, run.t1, run.dt, run.dtype)
-    interpolation = None
-    fixed_steps, fixed_steps_saving = (
-        (run.adjoint.fixed_steps, run.adjoint.fixed_steps_saving)
-        if isinstance(run.adjoint, ReversibleAdjoint)
-        else (integrate_fixed_steps, integrate_fixed_steps_saving)
-    )
-    if not run.saves_on_grid():
-        plan = run.saving()
-        assert plan is not None  # fits_scan() checked it
-        saved_ts, ys, result, steps, interpolation = integrate_saving(
-            terms, solver, state0, args, plan, run.t0, run.t1, run.dtype
-        )
-    elif run.ts is None:
-        y1, result, steps = fixed_steps(
-            terms, solver, run.t0, run.t1, step, state0, args, run.dtype
-        )
-        signed = math.copysign(abs(step), run.t1 - run.t0)
-        reached = jnp.where(
-            result == diffrax.RESULTS.successful, run.t1, run.t0 + steps * signed
-        )
-        saved_ts = jnp.asarray(reached, dtype=run.dtype)[None]
-        ys = jax.tree_util.tree_map(lambda x: jnp.asarray(x)[None], y1)
-    else:
-        step = math.copysign(abs(step), run.t1 - run.t0)
-        grid = run.save_grid()
-        assert grid is not None  # fits_scan() checked it
-        ys, result, steps, saved = fixed_steps_saving(
-            terms, solver, run.t0, step, grid, state0, args, run.dtype
-        )
-        saved_ts = jnp.where(saved, run.ts, jnp.inf)
-        ys = jax.tree_util.tree_map(
-            lambda x: jnp.where(saved.reshape((-1,) + (1,) * (x.ndim - 1)), x, jnp.inf),
-            ys,
-        )
-    if run.throw:
-        ys = eqx.error_if(ys, result == diffrax.RESULTS.nonfinite, _NON_FINITE_MESSAGE)
-        # diffrax's text cannot say why a stage solve failed; the solver can.
-        stage_failed = (result == diffrax.RESULTS.nonlinear_max_steps_reached) | (
-            result == diffrax.RESULTS.nonlinear_divergence
-        )
-        ys = eqx.error_if(ys, stage_failed, stage_failure_message(solver))
-        ys = result.error_if(ys, result != diffrax.RESULTS.successful)
-    counts = jnp.asarray(steps)
-    stats = dict(
-        num_steps=counts, num_accepted_steps=counts, num_rejected_steps=0 * counts
-    )
-    return saved_ts, ys, stats, result, interpolation
-
-
-def _diffeqsolve(terms, solver, state0, args, run: _Run):
-    """The general path: `diffrax.diffeqsolve` with saving, adjoints, adaptivity."""
-    t0, t1, dt, ts, dtype = run.t0, run.t1, run.dt, run.ts, run.dtype
-    controller, dt0 = stepping(solver, t0, t1, dt, run.rtol, run.atol, run.controller)
-    max_steps = run.max_steps
-    if max_steps is None:
-        fixed = run.controller is None or isinstance(
-            run.controller, diffrax.ConstantStepSize
-        )
-        max_steps = (fixed and diffrax_step_bound(t0, t1, dt)) or 100_000
-    # diffrax promotes the state to the dtype of the times: give it the state's.
-    t0, t1 = jnp.asarray(t0, dtype=dtype), jnp.asarray(t1, dtype=dtype)
-    dt0 = None if dt0 is None else jnp.asarray(dt0, dtype=dtype)
-    saveat = run.saveat
-    if saveat is None:
-        saveat = diffrax.SaveAt(ts=ts) if ts is not None else diffrax.SaveAt(t1=True)
-    if run.dense:
-        saveat = eqx.tree_at(lambda s: s.dense, saveat, True)
-    if needs_hermite(solver) and _interpolates(saveat, run.event):
-        solver = HermiteDenseOutput.for_solver(solver, terms)
-    if run.progress_meter is not None:
-        meter = run.progress_meter
-    else:
-        meter = (
-            diffrax.TextProgressMeter() if run.progress else diffrax.NoProgressMeter()
-        )
-    solution = diffrax.diffeqsolve(
-        terms,
-        solver,
-        t0,
-        t1,
-        dt0,
-        state0,
-        args=args,
-        saveat=saveat,
-        stepsize_controller=controller,
-        max_steps=max_steps,
-        adjoint=diffrax.RecursiveCheckpointAdjoint()
-        if run.adjoint is None
-        else run.adjoint,
-        progress_meter=meter,
-        event=run.event,
-        throw=run.throw,
-    )
-    if solution.ts is None or solution.ys is None:
-        raise ValueError("saveat must save at least one state (t0, t1, ts or steps)")
-    # Arrays only, so trajectories batch under vmap and jit.
-    stats: dict[str, Any] = {
-        key: jnp.asarray(value) for key, value in solution.stats.items()
-    }
-    if run.event is not None:
-        stats["event_mask"] = solution.event_mask
-    return solution.ts, solution.ys, stats, solution.result, solution.interpolation
-
-
-def _interpolates(saveat: diffrax.SaveAt, event: diffrax.Event | None) -> bool:
-    """Whether a run reads states between steps: saves at given times, dense
-    output, or an event to locate."""
-    subs = jax.tree_util.tree_leaves(
-        saveat.subs, is_leaf=lambda x: isinstance(x, diffrax.SubSaveAt)
-    )
-    return saveat.dense or event is not None or any(s.ts is not None for s in subs)
