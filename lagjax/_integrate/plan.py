@@ -62,7 +62,7 @@ class RunPlan(NamedTuple):
     max_steps: int | None
     progress: bool
     saveat: diffrax.SaveAt | None
-    adjoint: diffrax.AbstractAdjoint | None  # or lj.ReversibleAdjoint (scans only)
+    adjoint: Any  # a diffrax adjoint, lj.ReversibleAdjoint (scans only), or None
     throw: bool
     dtype: Any
     dense: bool = False
