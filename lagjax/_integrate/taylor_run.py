@@ -29,31 +29,38 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.core import Tracer
 from jax.flatten_util import ravel_pytree
 
 from lagjax._core.precision import cast_floats, working_dtype
 from lagjax._core.system import AbstractSystem
 from lagjax._integrate.checks.inputs import check_simulate_inputs
 from lagjax._integrate.checks.late_failure import raise_if_failed
-from lagjax.taylor.heyoka_backend import heyoka_integrate
+from lagjax._integrate.taylor_heyoka import (
+    BAD_TIMES_MESSAGE,
+    bad_times,
+    heyoka_member,
+    heyoka_runner,
+    run_statistics,
+)
 from lagjax.taylor.integrate import RESULTS as TAYLOR_RESULTS
 from lagjax.taylor.integrate import taylor_integrate
 from lagjax.taylor.solver import Taylor
 from lagjax.trajectory import Trajectory
 
-_HEYOKA_RESULTS = {
-    "time_limit": diffrax.RESULTS.successful,
-    "step_limit": diffrax.RESULTS.max_steps_reached,
-    "err_nf_state": diffrax.RESULTS.nonfinite,
-}
-
 
 def run_taylor(
     system: Any, y0: Any, t0: Any, t1: Any, dt: Any, solver: Taylor, ts: Any,
     args: Any, rtol: float, atol: float, max_steps: int | None, throw: bool,
-    **options: Any,
+    event: Any = None, **options: Any,
 ) -> Trajectory:  # fmt: skip
     """`simulate` for a `Taylor` solver: the checks, the run, the verdict."""
+    if event is not None and solver.backend != "heyoka":
+        raise ValueError(
+            "lj.Taylor(backend='jax') does not locate events yet: pass "
+            "solver=lj.Taylor(backend='heyoka') (events on the step polynomial) or "
+            "a diffrax solver (diffrax.Dopri8())"
+        )
     refuse_taylor_options(dt=dt, **options)
     if t1 is None and isinstance(system, AbstractSystem):
         t1 = system.default_span()[0]
@@ -67,7 +74,8 @@ def run_taylor(
         )
     dtype = working_dtype(y0)
     system.check_start(y0, t0, args, dtype)
-    if solver.backend == "heyoka":  # NumPy in, NumPy out: no eager JAX dispatch
+    if solver.backend == "heyoka" and not _traced(y0, args, ts, t0, t1):
+        # NumPy in, NumPy out: no eager JAX dispatch on the fast CPU route
         y0 = jax.tree_util.tree_map(lambda x: np.asarray(x, dtype=dtype), tuple(y0))
         save_ts = None if ts is None else np.asarray(ts, dtype=dtype)
     else:
@@ -75,29 +83,39 @@ def run_taylor(
         save_ts = None if ts is None else jnp.asarray(ts, dtype=dtype)
     trajectory = simulate_taylor(
         system, y0, t0, t1, save_ts, args, solver,
-        rtol=rtol, atol=atol, max_steps=max_steps,
+        rtol=rtol, atol=atol, max_steps=max_steps, event=event,
     )  # fmt: skip
     if throw:
-        if any(
-            isinstance(x, jax.core.Tracer)
-            for x in jax.tree_util.tree_leaves((trajectory.ts, trajectory.ys))
-        ):
-            trajectory = eqx.error_if(
-                trajectory, trajectory.result != diffrax.RESULTS.successful,
-                "lj.Taylor did not reach t1: raise max_steps, or see traj.result "
-                "with throw=False",
-            )  # fmt: skip
-        elif not _succeeded(trajectory):
-            raise_if_failed(trajectory, trajectory.stats["max_steps"], rtol)
+        trajectory = _verdict(trajectory, rtol)
     return trajectory
 
 
-def _succeeded(trajectory: Trajectory) -> bool:
-    """Whether a concrete run succeeded (heyoka says so in its status)."""
-    status = trajectory.run_stats.get("heyoka_status")
-    if status is not None:
-        return status == "time_limit"
-    return bool(trajectory.result == diffrax.RESULTS.successful)
+def _traced(*trees: Any) -> bool:
+    leaves = jax.tree_util.tree_leaves(trees)
+    return any(isinstance(x, Tracer) for x in leaves)
+
+
+def _verdict(trajectory: Trajectory, rtol: float) -> Trajectory:
+    """A failed run raised: now for concrete values, at run time (`eqx.error_if`)
+    for traced ones. Ending at an event is no failure."""
+    stats = trajectory.run_stats
+    if _traced(trajectory.ts, trajectory.ys):
+        if "succeeded" in stats:  # heyoka: a code per member
+            failed = ~stats["succeeded"]
+            trajectory = eqx.error_if(trajectory, stats["bad_times"], BAD_TIMES_MESSAGE)
+        else:
+            failed = trajectory.result != diffrax.RESULTS.successful
+        return eqx.error_if(
+            trajectory, failed,
+            "lj.Taylor did not reach t1: raise max_steps, or see traj.result "
+            "with throw=False",
+        )  # fmt: skip
+    succeeded = stats.get("succeeded")
+    if succeeded is None:
+        succeeded = trajectory.result == diffrax.RESULTS.successful
+    if not bool(np.all(succeeded)):
+        raise_if_failed(trajectory, stats["max_steps"], rtol)
+    return trajectory
 
 
 def refuse_taylor_options(**options: Any) -> None:
@@ -106,8 +124,9 @@ def refuse_taylor_options(**options: Any) -> None:
     if given:
         raise ValueError(
             f"lj.Taylor does not support {', '.join(given)} yet: save at given "
-            "times with ts=..., or use a diffrax solver (diffrax.Dopri8()) for "
-            "events, dense output, step-size controllers and custom adjoints"
+            "times with ts=... (filled from the step polynomials), or use a diffrax "
+            "solver (diffrax.Dopri8()) for dense output, step-size controllers and "
+            "custom adjoints"
         )
 
 
@@ -173,8 +192,8 @@ def flat_vector_field(system: AbstractSystem, y0: Any):
 def simulate_taylor(
     system: AbstractSystem,
     y0: Any,
-    t0: float,
-    t1: float,
+    t0: Any,
+    t1: Any,
     ts: Any,
     args: Any,
     solver: Taylor,
@@ -182,6 +201,7 @@ def simulate_taylor(
     rtol: float,
     atol: float,
     max_steps: int | None,
+    event: Any = None,
 ) -> Trajectory:
     """The run of `simulate(system, y0, solver=lj.Taylor(...))` (module docstring);
     failures are reported in `result` (the caller raises)."""
@@ -190,39 +210,37 @@ def simulate_taylor(
     atol = atol if solver.atol is None else solver.atol
     steps = max_steps or solver.max_steps
     if solver.backend == "heyoka":
-        solution = heyoka_integrate(
-            field, np.asarray(flat0), float(t0), float(t1), ts=ts, args=args,
-            rtol=rtol, atol=atol, max_steps=steps, throw=False,
+        runner, structure = heyoka_runner(
+            field, flat0.shape[0], args, solver, rtol, atol, steps, event,
+            final_only=ts is None,
         )  # fmt: skip
-        saved_ts, flat_ys = np.asarray(solution.ts), np.asarray(solution.ys)
-        result = _HEYOKA_RESULTS.get(str(solution.status).split(".")[-1])
-        result = diffrax.RESULTS.internal_error if result is None else result
-        num_steps = np.asarray(solution.num_steps)
-        status = str(solution.status).split(".")[-1]
-        # NumPy to the end: no eager JAX dispatch on the fast CPU route
-        ys = _unravel_rows(field, flat_ys)
-    else:
-        solution = taylor_integrate(
-            field, flat0, t0, t1, ts=ts, args=args, rtol=rtol, atol=atol,
-            order=solver.order, max_steps=steps, forward_mode=solver.forward_mode,
+        rows = heyoka_member(runner, flat0, args, t0, t1, ts)
+        stats = run_statistics(rows, structure, steps)
+        stats["bad_times"] = bad_times(rows)
+        result = stats.pop("result")
+        if isinstance(rows.ys, np.ndarray):  # NumPy to the end on the CPU route
+            ys = _unravel_rows(field, rows.ys)
+        else:
+            ys = jax.vmap(unravel)(rows.ys)
+        return Trajectory(
+            ts=rows.ts, ys=ys, system=system, args=args, run_stats=stats,  # pyright: ignore[reportArgumentType]
+            result=result, solver_name="Taylor[heyoka]",
         )  # fmt: skip
-        saved_ts, flat_ys, num_steps = solution.ts, solution.ys, solution.num_steps
-        result = _as_diffrax_result(solution.result)
-        ys = jax.vmap(unravel)(flat_ys)
+    solution = taylor_integrate(
+        field, flat0, t0, t1, ts=ts, args=args, rtol=rtol, atol=atol,
+        order=solver.order, max_steps=steps, forward_mode=solver.forward_mode,
+    )  # fmt: skip
     stats: dict[str, Any] = {
-        "num_steps": num_steps,
-        "num_accepted_steps": num_steps,
-        "num_rejected_steps": 0 * num_steps,
+        "num_steps": solution.num_steps,
+        "num_accepted_steps": solution.num_steps,
+        "num_rejected_steps": 0 * solution.num_steps,
         "max_steps": steps,
-        "finite": np.all(np.isfinite(flat_ys))
-        if isinstance(flat_ys, np.ndarray)
-        else jnp.all(jnp.isfinite(flat_ys)),
+        "finite": jnp.all(jnp.isfinite(solution.ys)),
     }
-    if solver.backend == "heyoka":
-        stats["heyoka_status"] = status
     return Trajectory(
-        ts=saved_ts, ys=ys, system=system, args=args, run_stats=stats,
-        result=result, solver_name=f"Taylor[{solver.backend}]",
+        ts=solution.ts, ys=jax.vmap(unravel)(solution.ys), system=system, args=args,
+        run_stats=stats, result=_as_diffrax_result(solution.result),
+        solver_name=f"Taylor[{solver.backend}]",
     )  # fmt: skip
 
 

@@ -37,20 +37,21 @@ Taylor methods", Experimental Mathematics 14 (2005) 99.
 from __future__ import annotations
 
 import math
-from collections import OrderedDict
-from collections.abc import Callable, Hashable
+from collections.abc import Callable
 from typing import Any, NamedTuple
 
 import jax
 import numpy as np
+from jax.core import Tracer
 
+from lagjax.taylor.heyoka_cache import heyoka_cache_info, translated
 from lagjax.taylor.heyoka_expressions import (
     HeyokaSystem,
     flatten_args,
-    import_heyoka,
     jaxpr_to_heyoka,
 )
 from lagjax.taylor.heyoka_rules import UnsupportedPrimitiveError
+from lagjax.taylor.heyoka_runs import HeyokaRunner, outcome_name
 
 __all__ = [
     "HeyokaSolution",
@@ -62,11 +63,6 @@ __all__ = [
     "jaxpr_to_heyoka",
 ]
 
-CACHE_SIZE = 32  # translations and compiled integrators kept, least recent dropped
-# State dimension above which heyoka compiles in compact mode (loops over the
-# operations instead of straight-line code). Measured, 4-link pendulum (dimension
-# 8): straight-line 15 s to compile, 10 ms to run; compact 2.3 s and 24 ms.
-COMPACT_ABOVE = 6
 DEFAULT_MAX_STEPS = 100_000
 
 VectorField = Callable[[Any, Any, Any], Any]
@@ -82,24 +78,6 @@ class HeyokaSolution(NamedTuple):
     ys: np.ndarray
     num_steps: Any
     status: Any
-
-
-class _Caches:
-    """Translations per function and signature; integrators per system."""
-
-    def __init__(self) -> None:
-        self.systems: OrderedDict[Hashable, HeyokaSystem] = OrderedDict()
-        self.integrators: OrderedDict[Hashable, Any] = OrderedDict()
-        self.translations = 0
-        self.compilations = 0
-
-
-_CACHES = _Caches()
-
-
-def heyoka_cache_info() -> dict[str, int]:
-    """How many translations and compilations this process has made so far."""
-    return dict(translations=_CACHES.translations, compilations=_CACHES.compilations)
 
 
 def heyoka_tolerance(rtol: float, atol: float, tol: float | None = None) -> float:
@@ -144,28 +122,12 @@ def heyoka_integrate(
     y0 = np.asarray(y0, dtype=fp_type)
     if y0.ndim != 1:
         raise ValueError(f"y0 must be one state of shape (n,); got shape {y0.shape}.")
-    system = _translate(vector_field, y0.shape[0], args)
-    ta = _integrator(
-        system, heyoka_tolerance(rtol, atol, tol), 1, fp_type, compact_mode
-    )
-    ta.time, ta.state[:] = fp_type(t0), y0
-    ta.pars[:] = flatten_args(args).astype(fp_type)
-    grid = _save_times(ts, t0, t1, fp_type)
-    status, steps = "time_limit", 0
-    if grid[0] != t0:
-        outcome, _, _, steps, *_ = ta.propagate_until(grid[0], max_steps=max_steps)
-        status = outcome.name
-    rows = np.full((grid.shape[0], y0.shape[0]), np.nan, dtype=fp_type)
-    if grid.size == 1 and status == "time_limit":
-        rows[0] = ta.state
-    elif status == "time_limit":
-        outcome, _, _, more, _, states = ta.propagate_grid(
-            grid, max_steps=max(max_steps - steps, 1)
-        )
-        status, steps = outcome.name, steps + more
-        rows[: states.shape[0]] = states
-    _check(status, throw, max_steps, system)
-    return HeyokaSolution(grid, rows, steps, status)
+    run = heyoka_integrate_batch(
+        vector_field, y0[None], t0, t1, ts=ts, args=args, rtol=rtol, atol=atol,
+        tol=tol, max_steps=max_steps, throw=throw, fp_type=fp_type,
+        compact_mode=compact_mode,
+    )  # fmt: skip
+    return HeyokaSolution(run.ts, run.ys[0], int(run.num_steps[0]), run.status[0])
 
 
 def heyoka_integrate_batch(
@@ -205,71 +167,29 @@ def heyoka_integrate_batch(
         args=args,
         args_batch=args_batch,
     )
-    hy = import_heyoka()
     y0s = np.asarray(y0s, dtype=fp_type)
     if y0s.ndim != 2:
         raise ValueError(f"y0s must have shape (B, n); got shape {y0s.shape}.")
     members, n = y0s.shape
     pars = _batch_pars(args, args_batch, members).astype(fp_type)
     example = args if args_batch is None else _first_member(args_batch)
-    system = _translate(vector_field, n, example)
-    width = batch_size or hy.recommended_simd_size(fp_type=fp_type)
-    ta = _integrator(
-        system, heyoka_tolerance(rtol, atol, tol), width, fp_type, compact_mode
-    )
+    system = translated(vector_field, n, example)
     grid = _save_times(ts, t0, t1, fp_type)
-    ys = np.full((members, grid.shape[0], n), np.nan, dtype=fp_type)
-    steps, status = np.zeros(members, int), np.empty(members, dtype=object)
-    for start in range(0, members, width):
-        chunk = np.minimum(np.arange(start, start + width), members - 1)
-        live = chunk[: min(width, members - start)]
-        rows, chunk_steps, chunk_status = _run_chunk(
-            ta, y0s[chunk], pars[chunk], t0, grid, max_steps
-        )
-        ys[live], steps[live] = rows[: live.size], chunk_steps[: live.size]
-        status[live] = chunk_status[: live.size]
+    runner = HeyokaRunner(
+        system, heyoka_tolerance(rtol, atol, tol), max_steps, final_only=ts is None,
+        fp_type=fp_type, compact_mode=compact_mode, batch_size=batch_size,
+    )  # fmt: skip
+    rows = runner(y0s, pars, np.full(members, t0), np.full(members, t1),
+                  np.tile(grid, (members, 1)))  # fmt: skip
+    status = np.array([outcome_name(code) for code in rows.codes], dtype=object)
     for outcome in dict.fromkeys(status):
         _check(outcome, throw, max_steps, system)
-    return HeyokaSolution(grid, ys, steps, status)
-
-
-def _run_chunk(
-    ta: Any,
-    y0s: np.ndarray,
-    pars: np.ndarray,
-    t0: float,
-    grid: np.ndarray,
-    max_steps: int,
-):
-    """One SIMD batch from `t0` over `grid`: states (width, T, n), steps, outcomes."""
-    width = y0s.shape[0]
-    ta.set_time(np.full(width, t0, dtype=y0s.dtype))
-    ta.state[:] = y0s.T
-    ta.pars[:] = pars.T
-    steps = np.zeros(width, int)
-    if grid[0] != t0:
-        ta.propagate_until(grid[0], max_steps=max_steps)
-        steps += [res[3] for res in ta.propagate_res]
-    rows = np.full((width, grid.shape[0], y0s.shape[1]), np.nan, dtype=y0s.dtype)
-    if grid[0] != t0:
-        outcomes = np.array([res[0].name for res in ta.propagate_res], dtype=object)
-        if grid.size == 1 or set(outcomes) != {"time_limit"}:
-            reached = outcomes == "time_limit"
-            rows[reached, 0] = ta.state.T[reached]
-            return rows, steps, outcomes
-    block = np.repeat(grid[:, None], width, axis=1)
-    _, states = ta.propagate_grid(block, max_steps=max_steps)
-    steps += [res[3] for res in ta.propagate_res]
-    outcomes = np.array([res[0].name for res in ta.propagate_res], dtype=object)
-    rows[:, : states.shape[0]] = np.transpose(states, (2, 0, 1))
-    return rows, steps, outcomes
+    return HeyokaSolution(grid, rows.ys, rows.num_steps, status)
 
 
 def _refuse_traced(function: str, **values: Any) -> None:
     for name, value in values.items():
-        if any(
-            isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(value)
-        ):
+        if any(isinstance(x, Tracer) for x in jax.tree_util.tree_leaves(value)):
             raise TypeError(
                 f"{function} got a traced `{name}`: heyoka runs compiled C++ on NumPy "
                 "values and cannot be used under jax.jit, jax.grad or jax.vmap. For "
@@ -325,68 +245,3 @@ def _member(tree: Any, i: int) -> Any:
 
 def _first_member(tree: Any) -> Any:
     return _member(tree, 0)
-
-
-def _signature(args: Any) -> Hashable:
-    leaves, treedef = jax.tree_util.tree_flatten(args)
-    return treedef, tuple((np.shape(x), np.asarray(x).dtype.str) for x in leaves)
-
-
-def _translate(vector_field: VectorField, n: int, args: Any) -> HeyokaSystem:
-    """The translation of `vector_field`, cached per function and signature."""
-    try:
-        key = (vector_field, n, _signature(args))
-        hash(key)
-    except TypeError:
-        key = None
-    if key is not None and key in _CACHES.systems:
-        _CACHES.systems.move_to_end(key)
-        return _CACHES.systems[key]
-    system = jaxpr_to_heyoka(vector_field, n, args)
-    _CACHES.translations += 1
-    if key is not None:
-        _remember(_CACHES.systems, key, system)
-    return system
-
-
-def _integrator(
-    system: HeyokaSystem,
-    tol: float,
-    width: int,
-    fp_type: Any,
-    compact_mode: bool | None,
-) -> Any:
-    """A compiled heyoka integrator for `system`, cached per system, tolerance,
-    batch width and precision (the expressions are the key: a function traced
-    anew to the same equations reuses the compilation)."""
-    hy = import_heyoka()
-    key = (system.key, tol, width, np.dtype(fp_type).str, compact_mode)
-    if key in _CACHES.integrators:
-        _CACHES.integrators.move_to_end(key)
-        return _CACHES.integrators[key]
-    n = len(system.equations)
-    compact = n > COMPACT_ABOVE if compact_mode is None else compact_mode
-    options = dict(tol=fp_type(tol), compact_mode=compact, fp_type=fp_type)
-    if width == 1:
-        ta = hy.taylor_adaptive(
-            list(system.equations),
-            np.zeros(n, fp_type),
-            pars=np.zeros(system.num_pars, fp_type),
-            **options,
-        )
-    else:
-        ta = hy.taylor_adaptive_batch(
-            list(system.equations),
-            np.zeros((n, width), fp_type),
-            pars=np.zeros((system.num_pars, width), fp_type),
-            **options,
-        )
-    _CACHES.compilations += 1
-    _remember(_CACHES.integrators, key, ta)
-    return ta
-
-
-def _remember(cache: OrderedDict, key: Hashable, value: Any) -> None:
-    cache[key] = value
-    while len(cache) > CACHE_SIZE:
-        cache.popitem(last=False)

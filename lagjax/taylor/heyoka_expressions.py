@@ -140,17 +140,39 @@ def jaxpr_to_heyoka(
     that heyoka's expression system cannot express.
     """
     hy = import_heyoka()
-    closed = jax.make_jaxpr(vector_field)(
-        jnp.zeros((), float), jnp.zeros((n,), float), args_example
-    )
-    (out_aval,) = closed.out_avals
-    if tuple(out_aval.shape) != (n,):
+    rhs, out_shape, _, poisoned = translate_function(vector_field, n, args_example)
+    if out_shape != (n,):
         raise ValueError(
             f"vector_field must return an array of shape ({n},) for a state of shape "
-            f"({n},); it returned shape {tuple(out_aval.shape)}."
+            f"({n},); it returned shape {out_shape}."
         )
-    states = [hy.make_vars(f"y{i}") for i in range(n)]
-    inputs = [_objects([hy.time], ()), _objects(states, (n,))]
+    states = state_variables(hy, n)
+    num_pars = sum(int(np.size(x)) for x in jax.tree_util.tree_leaves(args_example))
+    return HeyokaSystem(tuple(zip(states, rhs)), num_pars, poisoned)
+
+
+def state_variables(hy: Any, n: int) -> list[Any]:
+    """The heyoka variables of the state y = (y0, …, y{n-1})."""
+    return [hy.make_vars(f"y{i}") for i in range(n)]
+
+
+def translate_function(
+    fn: Callable[[Any, Any, Any], Any], n: int, args_example: Any = None
+) -> tuple[list[Any], tuple[int, ...], Any, tuple[str, ...]]:
+    """`fn(t, y, args)` (one array output) as heyoka expressions in the state
+    variables, `heyoka.time` and the parameters: (the output's elements as
+    expressions, its shape, its dtype, the poisoned primitives met)."""
+    hy = import_heyoka()
+    closed = jax.make_jaxpr(fn)(
+        jnp.zeros((), float), jnp.zeros((n,), float), args_example
+    )
+    if len(closed.out_avals) != 1:
+        raise ValueError(
+            f"the function translated for heyoka must return one array; it returned "
+            f"{len(closed.out_avals)}."
+        )
+    (out_aval,) = closed.out_avals
+    inputs = [_objects([hy.time], ()), _objects(state_variables(hy, n), (n,))]
     offset = 0
     for leaf in jax.tree_util.tree_leaves(args_example):
         size = int(np.size(leaf))
@@ -159,9 +181,12 @@ def jaxpr_to_heyoka(
         )
         offset += size
     walk = _Walk(hy)
-    (out,) = walk.evaluate(closed.jaxpr, closed.consts, inputs)
-    rhs = [as_expression(hy, e) for e in np.asarray(out, dtype=object).ravel()]
-    return HeyokaSystem(tuple(zip(states, rhs)), offset, tuple(walk.poisoned))
+    # Equations on numbers are evaluated now, also inside a caller's `jit`.
+    with jax.ensure_compile_time_eval():
+        (out,) = walk.evaluate(closed.jaxpr, closed.consts, inputs)
+    elements = [as_expression(hy, e) for e in np.asarray(out, dtype=object).ravel()]
+    shape = tuple(out_aval.shape)
+    return elements, shape, out_aval.dtype, tuple(walk.poisoned)
 
 
 def _objects(elements: Sequence[Any], shape: Sequence[int]) -> np.ndarray:

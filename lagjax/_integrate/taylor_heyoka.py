@@ -1,0 +1,207 @@
+"""`simulate` with `lj.Taylor(backend="heyoka")`: a system's run, and its events,
+on heyoka's compiled Taylor integrator.
+
+The vector field on the flat state y (`taylor_run.FlatVectorField`) is translated
+into heyoka's expressions once per system and `args` signature, every scalar of
+`args` a heyoka parameter (`lagjax.taylor.heyoka_cache`); the run is a
+`HeyokaRunner` (`lagjax.taylor.heyoka_runs`) reached directly for concrete inputs
+and through `jax.pure_callback` under `jit`/`vmap`, where a whole `vmap` batch is
+one call of heyoka's batch mode (`lagjax.taylor.heyoka_callback`).
+
+**Events.** `event=diffrax.Event(cond_fn, direction=...)` with real-valued
+conditions `cond_fn(t, y, args)` — `y` in `y0`'s convention, as for every other
+solver — become heyoka terminal events: each condition's jaxpr is translated
+like the vector field, and heyoka finds its zero on every step's Taylor
+polynomial (to machine precision; `root_finder` is not needed). The run ends at
+the first event: `result` is `RESULTS.event_occurred`, `stats["event_mask"]`
+says which condition fired, and the saves are those of diffrax: with `ts`, the
+ones before the event (the rest t = inf); without, the state at the event.
+
+References: F. Biscani & D. Izzo, "Revisiting high-order Taylor methods for
+astrodynamics and celestial mechanics", MNRAS 504 (2021) 2614 (event detection
+on the Taylor polynomial); the diffrax documentation, `diffrax.Event`.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import diffrax
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.core import Tracer
+
+from lagjax.taylor.heyoka_backend import heyoka_tolerance
+from lagjax.taylor.heyoka_cache import translated
+from lagjax.taylor.heyoka_callback import heyoka_member_run
+from lagjax.taylor.heyoka_expressions import translate_function
+from lagjax.taylor.heyoka_runs import (
+    BAD_TIMES,
+    FIRST_EVENT,
+    NON_FINITE,
+    STEP_LIMIT,
+    SUCCESS,
+    HeyokaEvent,
+    HeyokaRunner,
+    Rows,
+    outcome_name,
+)
+from lagjax.taylor.solver import Taylor
+
+BAD_TIMES_MESSAGE = (
+    "lj.Taylor(backend='heyoka'): the save times ts must be strictly ordered from "
+    "t0 to t1"
+)
+
+
+def heyoka_runner(
+    field: Any, n: int, args: Any, solver: Taylor, rtol: float, atol: float,
+    max_steps: int, event: Any, final_only: bool,
+) -> tuple[HeyokaRunner, Any]:  # fmt: skip
+    """The run configuration, and the structure of the event's conditions (None
+    without an event)."""
+    example = _shapes(args)
+    system = translated(field, n, example)
+    events, structure = _events(event, field, n, example)
+    tol = heyoka_tolerance(_concrete("rtol", rtol), _concrete("atol", atol))
+    runner = HeyokaRunner(system, tol, max_steps, events, final_only)
+    return runner, structure
+
+
+def heyoka_member(
+    runner: HeyokaRunner, flat0: Any, args: Any, t0: Any, t1: Any, ts: Any
+) -> Rows:
+    """One member's `Rows` (see `heyoka_callback.heyoka_member_run`)."""
+    dtype = flat0.dtype
+    grid = (t1 if ts is None else ts, t0, t1)
+    if any(isinstance(x, Tracer) for x in jax.tree_util.tree_leaves(
+        (flat0, args, grid)
+    )):  # fmt: skip
+        leaves = [jnp.ravel(x).astype(dtype) for x in jax.tree_util.tree_leaves(args)]
+        pars = jnp.concatenate(leaves) if leaves else jnp.zeros(0, dtype)
+        times = jnp.atleast_1d(jnp.asarray(grid[0], dtype))
+        t0, t1 = jnp.asarray(t0, dtype), jnp.asarray(t1, dtype)
+    else:
+        leaves = [np.ravel(x).astype(dtype) for x in jax.tree_util.tree_leaves(args)]
+        pars = np.concatenate(leaves) if leaves else np.zeros(0, dtype)
+        times = np.atleast_1d(np.asarray(grid[0], dtype))
+    return heyoka_member_run(runner, flat0, pars, t0, t1, times)
+
+
+def run_statistics(rows: Rows, structure: Any, max_steps: int) -> dict[str, Any]:
+    """`traj.stats` of a heyoka run (NumPy for concrete rows, JAX for traced),
+    and its `diffrax.RESULTS`, under the key "result"."""
+    xp = np if isinstance(rows.codes, np.ndarray) else jnp
+    codes = rows.codes
+    unused = xp.isinf(rows.ts)[..., None]  # saves after an event
+    stats: dict[str, Any] = {
+        "num_steps": rows.num_steps,
+        "num_accepted_steps": rows.num_steps,
+        "num_rejected_steps": 0 * rows.num_steps,
+        "max_steps": max_steps,
+        "finite": xp.all(xp.isfinite(rows.ys) | unused, axis=(-2, -1)),
+        "succeeded": (codes == SUCCESS) | (codes >= FIRST_EVENT),
+        "result": _as_result(codes),
+    }
+    if structure is not None:
+        count = structure.num_leaves
+        fired = [codes == FIRST_EVENT + i for i in range(count)]
+        stats["event_mask"] = jax.tree_util.tree_unflatten(structure, fired)
+    if xp is np and codes.ndim == 0:
+        stats["heyoka_status"] = outcome_name(codes)
+    return stats
+
+
+_RESULTS = {
+    SUCCESS: diffrax.RESULTS.successful,
+    STEP_LIMIT: diffrax.RESULTS.max_steps_reached,
+    NON_FINITE: diffrax.RESULTS.nonfinite,
+}
+
+
+def _as_result(codes: Any) -> Any:
+    """Outcome codes as `diffrax.RESULTS`: by look-up for one concrete code (no
+    JAX dispatch), by `where` for traced or batched codes."""
+    if isinstance(codes, np.ndarray) and codes.ndim == 0:
+        code = int(codes)
+        if code >= FIRST_EVENT:
+            return diffrax.RESULTS.event_occurred
+        return _RESULTS.get(code, diffrax.RESULTS.internal_error)
+    where = diffrax.RESULTS.where
+    return where(
+        (codes == SUCCESS),
+        diffrax.RESULTS.successful,
+        where(
+            codes >= FIRST_EVENT,
+            diffrax.RESULTS.event_occurred,
+            where(
+                codes == STEP_LIMIT,
+                diffrax.RESULTS.max_steps_reached,
+                where(
+                    codes == NON_FINITE,
+                    diffrax.RESULTS.nonfinite,  # pyright: ignore[reportArgumentType]
+                    diffrax.RESULTS.internal_error,
+                ),
+            ),
+        ),
+    )
+
+
+def bad_times(rows: Rows) -> Any:
+    return rows.codes == BAD_TIMES
+
+
+def _shapes(args: Any) -> Any:
+    """`args` as shapes and dtypes: what the translation depends on."""
+    return jax.tree_util.tree_map(
+        lambda x: jax.ShapeDtypeStruct(np.shape(x), jnp.result_type(x)), args
+    )
+
+
+def _concrete(name: str, value: Any) -> float:
+    if isinstance(value, Tracer):
+        raise TypeError(
+            f"lj.Taylor(backend='heyoka') compiles heyoka's integrator for one "
+            f"tolerance: {name} must be a number, not a traced value"
+        )
+    return float(value)
+
+
+def _events(event: Any, field: Any, n: int, example: Any):
+    """The event's conditions as heyoka events, and their structure."""
+    if event is None:
+        return (), None
+    if not isinstance(event, diffrax.Event):
+        raise TypeError(
+            f"event must be a diffrax.Event (diffrax.Event(cond_fn)), got "
+            f"{type(event).__name__}"
+        )
+    conditions, structure = jax.tree_util.tree_flatten(event.cond_fn, is_leaf=callable)
+    direction = event.direction
+    if direction is None or isinstance(direction, bool):
+        directions = [direction] * len(conditions)
+    else:
+        directions = jax.tree_util.tree_leaves(direction, is_leaf=lambda x: x is None)
+    events = tuple(
+        HeyokaEvent(_condition(fn, field, n, example), {None: 0, True: 1, False: -1}[d])
+        for fn, d in zip(conditions, directions, strict=True)
+    )
+    return events, structure
+
+
+def _condition(fn: Any, field: Any, n: int, example: Any) -> Any:
+    """One condition g(t, y, args), y in `y0`'s convention, as an expression."""
+
+    def on_flat_state(t, y, args):
+        return jnp.asarray(fn(t, field.unravel(y), args))
+
+    elements, shape, dtype, _ = translate_function(on_flat_state, n, example)
+    if shape != () or not jnp.issubdtype(dtype, jnp.floating):
+        raise ValueError(
+            "lj.Taylor(backend='heyoka') locates an event where a real-valued "
+            "condition crosses zero (on the step's Taylor polynomial); this "
+            f"condition returns {dtype}{list(shape)}. Return one float, e.g. "
+            "`lambda t, y, args: y[0]` rather than `y[0] < 0`."
+        )
+    return elements[0]
