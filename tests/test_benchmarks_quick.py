@@ -29,7 +29,7 @@ from lagjax import diagnostics
 pytestmark = pytest.mark.integration
 
 ROOT = Path(__file__).resolve().parent.parent
-SCRIPTS = ("work_precision", "stability")  # modules of the benchmarks package
+SCRIPTS = ("work_precision", "stability", "sweep_scaling")  # benchmarks modules
 
 
 @pytest.fixture(scope="module")
@@ -285,3 +285,15 @@ def test_float32_runs_stay_float32_and_near_float64(results):
         assert row["outcome"] == "accurate", (key, row)
         assert 1e-9 < row["error"] < 1e-4, (key, row)  # float32, not silently float64
         assert row["energy_error"] < 1e-5, (key, row)
+
+
+def test_sweep_targets_are_measured_and_the_results_agree(results):
+    figures = json.loads((results / "sweep_scaling.json").read_text())
+    scaling = figures["scaling"]
+    # Two processes write what one writes, bit for bit; the orbits keep their energy.
+    assert scaling["bit_identical"] and scaling["failed"] == 0
+    assert scaling["energy_drift"] < 1e-8
+    assert scaling["speed_up"] > 0 and figures["streaming"]["to_disk_s"] > 0
+    memory = figures["memory"]
+    assert memory["peak_rss_sweep_mb"] >= memory["rss_before_sweep_mb"] > 0
+    assert memory["written_mb"] > memory["inputs_mb"] / 2  # final states: q and p

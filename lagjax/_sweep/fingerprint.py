@@ -14,6 +14,7 @@ a half-finished sweep.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import importlib.metadata
 import json
@@ -72,14 +73,20 @@ def _option_text(value: Any) -> Any:
     return _tree_text(value)
 
 
-def versions() -> dict[str, str]:
+@functools.cache  # reading package metadata takes ~0.1 s; it does not change
+def _installed_versions() -> tuple[tuple[str, str], ...]:
     found = {}
     for package in ("lagjax", "jax", "jaxlib", "diffrax", "equinox", "numpy"):
         try:
             found[package] = importlib.metadata.version(package)
         except importlib.metadata.PackageNotFoundError:
             found[package] = "not installed"
-    return found
+    return tuple(found.items())
+
+
+def versions() -> dict[str, str]:
+    """The versions of lagjax and of the packages its results depend on."""
+    return dict(_installed_versions())
 
 
 def describe_sweep(

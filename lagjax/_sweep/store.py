@@ -23,6 +23,7 @@ directories, which stay the truth when several processes write at once.
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import re
@@ -39,6 +40,7 @@ INDEX = "index.json"
 _CHUNK = re.compile(r"^chunk_(\d{6})$")
 
 
+@functools.cache  # asked once per chunk; the codes do not change
 def success_codes() -> tuple[int, ...]:
     """Codes of a member that ran as asked: a success, or an event that ended it.
 
