@@ -1,0 +1,98 @@
+"""Close encounters: the Pythagorean three-body problem (Burrau 1913; Szebehely &
+Peters 1967) through its encounters to the escape of the lightest body.
+
+The oracles are physics: the energy, total momentum and angular momentum of the
+start, kept along the run; the split of the energy of a far-apart triple into the
+escaper's two-body energy and the binary's; and Szebehely & Peters's outcome, the
+lightest body leaving on a hyperbolic orbit while the other two stay bound.
+"""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import lagjax as lj
+from lagjax.mechanics.particles import total_angular_momentum, total_momentum
+from lagjax.scenes.pythagorean import PythagoreanThreeBody
+
+
+def _energy(scene, q, p):
+    system = scene.system()
+    return system.kinetic_energy(p, 0.0, scene) + system.potential_energy(q, 0.0, scene)
+
+
+def test_the_start_is_at_rest_with_burraus_energy():
+    scene = PythagoreanThreeBody()
+    q0, p0 = scene.initial_state()
+    # sides 5, 4, 3 opposite the masses 5, 4, 3: E = −(12/5 + 15/4 + 20/3)
+    np.testing.assert_allclose(scene.energy(), -769 / 60, rtol=1e-15)
+    np.testing.assert_allclose(_energy(scene, q0, p0), -769 / 60, rtol=1e-15)
+    masses = np.asarray(scene.masses)
+    np.testing.assert_allclose(masses @ np.asarray(q0), 0.0, atol=1e-15)
+    heavier = PythagoreanThreeBody(gravitational_constant=2.0)
+    np.testing.assert_allclose(heavier.energy(), 2 * scene.energy(), rtol=1e-15)
+
+
+def test_bad_masses_are_refused_by_name():
+    with pytest.raises(ValueError, match="masses"):
+        PythagoreanThreeBody(masses=(3.0, -4.0, 5.0))
+
+
+def test_far_apart_the_energy_splits_into_escape_and_binary():
+    """A binary of bodies 2 and 3 and body 1 at distance D: the total energy is the
+    escaper's two-body energy plus the binary's, up to the tidal term ~ a²/D³."""
+    scene = PythagoreanThreeBody()
+    m1, m2, m3 = np.asarray(scene.masses)
+    distance = 1e5
+    q = jnp.array([[distance, 0.3], [-0.4, 0.0], [0.6, 0.1]])
+    q = q.at[1:].add(-(m2 * q[1] + m3 * q[2]) / (m2 + m3))  # binary centre at 0
+    escaping = jnp.array([0.7, 2.0])
+    relative = jnp.array([0.5, 3.0])  # momentum of body 3 relative to body 2
+    p = jnp.stack([
+        escaping,
+        -escaping * m2 / (m2 + m3) - relative,
+        -escaping * m3 / (m2 + m3) + relative,
+    ])  # fmt: skip
+    assert np.allclose(total_momentum(p), 0.0)
+    reduced = m2 * m3 / (m2 + m3)
+    separation = jnp.linalg.norm(q[2] - q[1])
+    binary = 0.5 * jnp.sum(relative**2) / reduced - m2 * m3 / separation
+    escape = scene.escape_energy(q, p)
+    np.testing.assert_allclose(escape + binary, _energy(scene, q, p), rtol=1e-12)
+    speed = jnp.linalg.norm(scene.relative_motion(q, p)[1])
+    total = m1 + m2 + m3
+    expected = 0.5 * m1 * (m2 + m3) / total * speed**2 - m1 * (m2 + m3) / distance
+    np.testing.assert_allclose(escape, expected, rtol=1e-6)
+
+
+def test_a_time_transformed_run_keeps_both_momenta_to_round_off():
+    scene = PythagoreanThreeBody()
+    traj = lj.simulate(scene, scene.initial_state(), t1=2.0, dt=0.02,
+                       ts=jnp.linspace(0.0, 2.0, 5),
+                       solver=lj.TimeTransformed(lj.StormerVerlet()))  # fmt: skip
+    assert float(jnp.max(jnp.abs(traj.q[-1] - traj.q[0]))) > 0.1  # it moved
+    assert float(jnp.max(jnp.abs(total_momentum(traj.p)))) < 1e-13
+    assert float(jnp.max(jnp.abs(total_angular_momentum(traj.q, traj.p)))) < 1e-13
+
+
+@pytest.mark.integration  # ~2·10⁵ steps and a compilation of tens of seconds
+def test_through_the_encounters_the_lightest_body_escapes():
+    scene = PythagoreanThreeBody()
+    ts = jnp.arange(0.0, 71.0)
+    traj = lj.simulate(scene, scene.initial_state(), t1=70.0, dt=0.01, ts=ts,
+                       solver=lj.TimeTransformed(lj.BlanesMoan4()))  # fmt: skip
+    assert traj.stats["solver"] == "TimeTransformed(BlanesMoan4)"
+    energy = np.asarray(traj.energy())
+    assert np.max(np.abs(energy / float(scene.energy()) - 1)) <= 1e-12
+    assert float(jnp.max(jnp.abs(total_momentum(traj.p)))) < 1e-12
+    assert float(jnp.max(jnp.abs(total_angular_momentum(traj.q, traj.p)))) < 1e-12
+    # Szebehely & Peters: body 1 (m = 3) leaves on a hyperbola, 2 and 3 stay bound.
+    separation, _ = scene.relative_motion(traj.q, traj.p)
+    distance = np.linalg.norm(np.asarray(separation), axis=-1)
+    assert np.all(np.diff(distance[-10:]) > 0)
+    escape = np.asarray(scene.escape_energy(traj.q[-10:], traj.p[-10:]))
+    assert np.all(escape > 0)
+    binary = energy[-1] - escape[-1]  # the centre of mass is at rest
+    assert binary < 0
+    binary_size = np.linalg.norm(np.asarray(traj.q[-1, 2] - traj.q[-1, 1]))
+    assert binary_size < distance[-1] / 10
