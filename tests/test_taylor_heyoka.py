@@ -122,3 +122,30 @@ def test_bad_tolerances_and_step_limit():
     partial = heyoka_integrate(vector_field, Y0, 0.0, 100.0, ts=[50.0, 100.0],
                                args=ARGS, max_steps=5, throw=False)  # fmt: skip
     assert partial.status == "step_limit" and np.isnan(partial.ys).all()
+
+
+def test_unstack_is_translated_on_every_axis():
+    """JAX ≥ 0.11 lowers `a, b = q` to the primitive `unstack`; here it is bound
+    directly (JAX 0.10 lowers unpacking to slices), on the state, on a 2-d view of
+    it, on the parameters and on numbers."""
+    from jax._src.lax.lax import unstack  # the primitive itself, on any JAX
+
+    def coupled(t, y, args):
+        q1, q2, v1, v2 = unstack(y, 0)
+        (a, u), (b, w) = unstack(y.reshape(2, 2), 1)  # columns (q1, v1), (q2, v2)
+        k1, k2 = unstack(args["k"], 0)
+        c1, c2 = unstack(jnp.array([1.0, 0.5]), 0)
+        return jnp.stack([u, w, -k1 * jnp.sin(q1) + c1 * (q2 - a) * v2,
+                          -k2 * jnp.sin(b) - c2 * (q2 - q1) + v1])  # fmt: skip
+
+    system = jaxpr_to_heyoka(coupled, 4, {"k": jnp.zeros(2)})
+    assert system.num_pars == 2
+    rhs = hy.cfunc([f for _, f in system.equations], [y for y, _ in system.equations])
+    states = np.random.default_rng(1).normal(size=(10, 4))
+    k = np.array([2.0, 3.0])
+    q1, q2, v1, v2 = states.T  # the same field written with NumPy's indexing
+    expected = np.stack([v1, v2, -k[0] * np.sin(q1) + (q2 - q1) * v2,
+                         -k[1] * np.sin(q2) - 0.5 * (q2 - q1) + v1], axis=1)  # fmt: skip
+    pars = np.repeat(k[:, None], 10, axis=1)
+    heyoka_values = rhs(np.ascontiguousarray(states.T), pars=pars).T
+    np.testing.assert_allclose(heyoka_values, expected, rtol=1e-14, atol=1e-14)

@@ -4,12 +4,13 @@ The rules of the jaxpr walk in `heyoka_expressions`. A value is a NumPy array: o
 numbers where it does not depend on the state, of objects (heyoka expressions or
 numbers) where it does. Four kinds of rule, tried in this order:
 
-1. **Numbers only** — the equation is evaluated by JAX itself (`_bind`), so integer
+1. **Numbers only** — the equation is evaluated by JAX itself (`bind`), so integer
    indexing, iotas and constant tables mean exactly what they mean in JAX.
 2. **Data movement** (`DATA_MOVES`: slice, reshape, broadcast, gather, scatter,
-   concatenate, pad, a select with a numeric predicate, …) — JAX applies the
-   primitive to an array of element indices and the result picks the elements
-   (`_move`); the index operands must be numbers.
+   concatenate, split, unstack, pad, a select with a numeric predicate, …) — NumPy
+   applies it to the array of objects where it has the same operation, else JAX
+   applies the primitive to an array of element indices and the result picks the
+   elements (`move`); the index operands must be numbers.
 3. **Element maps** (`elementwise_rules`): heyoka's arithmetic, elementary functions
    and relational operators; NumPy's where every operand is a number. `abs`, `max`,
    `min` and `sign` are `heyoka.select`s on comparisons (piecewise smooth: their
@@ -46,6 +47,7 @@ _SINGLE_DATA_OPERAND = (
     "gather",
     "dynamic_slice",
     "split",
+    "unstack",  # JAX ≥ 0.11 unpacks an array (`a, b = q`) with it
     "copy",
     "copy_p",
 )
@@ -189,6 +191,8 @@ NUMPY_MOVES: dict[str, Callable[..., Any]] = {
     "concatenate": lambda p, *xs: np.concatenate(xs, axis=p["dimension"]),
     "stack": lambda p, *xs: np.stack(xs, axis=p["axis"]),
     "split": lambda p, x: np.split(x, np.cumsum(p["sizes"])[:-1], axis=p["axis"]),
+    # each output the operand's slice at one index along `axis`
+    "unstack": lambda p, x: list(np.moveaxis(x, p["axis"], 0)),
     "copy": lambda p, x: x,
     "copy_p": lambda p, x: x,
 }
