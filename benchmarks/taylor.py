@@ -8,7 +8,10 @@ timed apart, every figure in one run:
   in long double when installed, else this integrator at order 26, tol 1e-16);
 - diffrax Dopri8 through `lj.simulate` at rtol = atol = 1e-14 beside it;
 - heyoka's `taylor_adaptive` at the same tolerances, when installed;
-- 1024 trajectories (θ₁ ∈ [0.1, 1], θ₂ = 0.3) to t = 10 under `jax.vmap`;
+- 1024 trajectories (θ₁ ∈ [0.1, 1], θ₂ = 0.3) to t = 10 under `jax.vmap` and by
+  the batch-native loop (`lagjax.taylor.batch.taylor_integrate_batch`: the
+  scalar graph, the batch on the minor axis, one order, a step per member),
+  beside heyoka's batch mode at its SIMD width when installed;
 - the compiled program's size: HLO instructions and fusions (XLA CPU kernels).
 
 `--quick` runs a reduced version (compilation dominates: about half a minute) (t = 10, one tolerance, 8 members).
@@ -33,6 +36,7 @@ import numpy as np
 
 import lagjax as lj
 from lagjax.taylor import taylor_integrate
+from lagjax.taylor.batch import taylor_integrate_batch
 
 G = 9.81
 Q0 = (0.5, 0.3)
@@ -152,6 +156,35 @@ def single(t1: float, tolerances, repeats: int) -> None:
     )
 
 
+def heyoka_batch(y0s: np.ndarray, t1: float, tol: float, repeats: int):
+    """(median s, final states) of heyoka's batch mode at its SIMD width, or None."""
+    try:
+        import heyoka as hy
+    except ImportError:
+        return None
+    a, b, wa, wb = hy.make_vars("a", "b", "wa", "wb")
+    lagrangian = wa**2 + 0.5 * wb**2 + wa * wb * hy.cos(a - b)
+    lagrangian += 2 * G * hy.cos(a) + G * hy.cos(b)
+    width = hy.recommended_simd_size()
+    integrator = hy.taylor_adaptive_batch(
+        hy.lagrangian(lagrangian, [a, b], [wa, wb]),
+        np.repeat(y0s[0][:, None], width, axis=1),
+        tol=tol,
+    )
+
+    def run():
+        out = np.empty_like(y0s)
+        for start in range(0, len(y0s), width):
+            integrator.set_time(np.zeros(width))
+            integrator.state[:] = y0s[start : start + width].T
+            integrator.propagate_until(t1)
+            out[start : start + width] = integrator.state.T
+        return out
+
+    _, median, out = timed(run, repeats=repeats)
+    return median, out
+
+
 def batch(t1: float, size: int, tol: float, repeats: int) -> None:
     y0s = jnp.stack(
         [
@@ -162,17 +195,37 @@ def batch(t1: float, size: int, tol: float, repeats: int) -> None:
         ],
         1,
     )
-    run = jax.jit(
+    reference = jax.jit(
         jax.vmap(
-            lambda y: taylor_integrate(vector_field, y, 0.0, t1, rtol=tol, atol=tol)
+            lambda y: taylor_integrate(
+                vector_field, y, 0.0, t1, rtol=1e-16, atol=1e-16, order=26
+            ).ys[-1]
         )
-    )
-    first, median, solution = timed(run, y0s, repeats=repeats)
-    print(
-        f"batch of {size} to t = {t1}, tol {tol:.0e}: {median * 1e3:.1f} ms "
-        f"({median / size * 1e6:.1f} µs per member; first call {first:.1f} s), "
-        f"steps per member max {int(solution.num_steps.max())}"
-    )
+    )(y0s)
+    peer = heyoka_batch(np.asarray(y0s), t1, tol, repeats)
+    print(f"batch of {size} to t = {t1}, tol {tol:.0e} (reference: Taylor p=26)")
+    if peer:
+        error = float(np.max(np.abs(peer[1] - np.asarray(reference))))
+        print(f"  heyoka batch mode: {peer[0] * 1e3:.1f} ms, error {error:.1e}")
+    routes = {
+        "vmap(taylor_integrate)": jax.vmap(
+            lambda y: taylor_integrate(vector_field, y, 0.0, t1, rtol=tol, atol=tol)
+        ),
+        "taylor_integrate_batch": lambda y: taylor_integrate_batch(
+            vector_field, y, 0.0, t1, rtol=tol, atol=tol
+        ),
+    }
+    for name, route in routes.items():
+        run = jax.jit(lambda y, route=route: route(y).ys[:, -1])
+        first, median, final = timed(run, y0s, repeats=repeats)
+        error = float(jnp.max(jnp.abs(final - reference)))
+        _, fusions = kernel_census(run, y0s)
+        ratio = f" (ratio {median / peer[0]:.1f})" if peer else ""
+        print(
+            f"  {name}: {median * 1e3:.1f} ms{ratio}, "
+            f"{median / size * 1e6:.1f} µs per member, error {error:.1e}, "
+            f"first call {first:.1f} s, {fusions} fusions"
+        )
 
 
 def main() -> None:

@@ -251,3 +251,32 @@ def test_vmap_equals_a_loop():
     batched = jax.jit(jax.vmap(_final_state))(y0s, gs)
     looped = jnp.stack([_final_state(y0, g) for y0, g in zip(y0s, gs)])
     assert jnp.allclose(batched, looped, rtol=0, atol=1e-15)
+
+
+def test_unstack_has_an_affine_rule():
+    # JAX ≥ 0.11 lowers `a, b = y` to the primitive unstack; produce it here.
+    from jax._src.lax.lax import unstack
+
+    def field(t, y, args):
+        a, b = unstack(y, 0)
+        return jnp.stack([b, -jnp.sin(a)])
+
+    y0 = jnp.array([0.4, 0.1])
+    ours = taylor_coefficients(field, 0.0, y0, order=5, unroll=False)
+    reference = _lie_coefficients(lambda y: field(0.0, y, None), y0, 5)
+    assert jnp.allclose(ours, reference, rtol=1e-13, atol=1e-15)
+
+
+def test_lowering_stores_no_array_in_a_static_field():
+    import warnings
+
+    from lagjax.taylor.coefficients import lower_vector_field
+
+    def field(t, y, args):  # split's sizes are NumPy integers in the jaxpr
+        a, b = jnp.split(y, 2)
+        return jnp.concatenate([b, -a])
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)
+        graph, _ = lower_vector_field(field, 0.0, jnp.ones(4), None)
+    assert graph.census()["Affine"] >= 1

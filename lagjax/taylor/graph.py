@@ -43,7 +43,7 @@ AFFINE = frozenset(
     {"add", "add_any", "sub", "neg", "concatenate", "pad", "select_n", "reshape"}
     | {"broadcast_in_dim", "squeeze", "expand_dims", "slice", "dynamic_slice"}
     | {"dynamic_update_slice", "gather", "transpose", "reduce_sum", "copy", "copy_p"}
-    | {"convert_element_type", "rev", "cumsum", "stack", "split", "real"}
+    | {"convert_element_type", "rev", "cumsum", "stack", "split", "unstack", "real"}
 )
 PIECEWISE_CONSTANT = frozenset({"sign", "floor", "ceil", "round", "stop_gradient"})
 BRANCHES = frozenset({"abs", "max", "min"})
@@ -62,8 +62,10 @@ class Graph(NamedTuple):
     series: frozenset[int]
     constants: dict[int, Any]
     avals: dict[int, Any]
-    inputs: tuple[int, ...]  # t, y, then the leaves of args
-    output: int
+    inputs: tuple[int, ...]  # t, the state, then the leaves of args
+    state: tuple[int, ...]  # y, or its elements y₀..yₙ₋₁ in a scalar graph
+    outputs: tuple[int, ...]  # dy/dt, or its elements in a scalar graph
+    scalar: bool = False  # every value a scalar; args enter element by element
 
     def census(self) -> Counter:
         """How many series operations of each rule the graph evaluates."""
@@ -74,6 +76,21 @@ class Graph(NamedTuple):
 
 def _is_float(aval: Any) -> bool:
     return jnp.issubdtype(aval.dtype, jnp.inexact)
+
+
+def _plain(value: Any) -> Any:
+    """NumPy scalars inside a primitive's params (`split`'s sizes are np.int64)
+    as Python numbers: the params are a static field of the rule, and equinox
+    warns of (and JAX would not hash) array leaves there."""
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, tuple) and not hasattr(value, "_fields"):
+        return tuple(_plain(v) for v in value)
+    return value
+
+
+def _params(eqn: Any) -> dict:
+    return {name: _plain(value) for name, value in eqn.params.items()}
 
 
 def _frozen(params: dict) -> tuple | None:
@@ -173,7 +190,7 @@ def _integer_power(builder: _Builder, x: int, n: int, aval: Any) -> int:
 
 def _series_rule(builder: _Builder, eqn: Any, ins: list[int]) -> tuple[int, ...]:
     """Lower one operation with a series input to its rule."""
-    name, prim, params = eqn.primitive.name, eqn.primitive, eqn.params
+    name, prim, params = eqn.primitive.name, eqn.primitive, _params(eqn)
     flags = builder.flags(ins)
     avals = [v.aval for v in eqn.outvars]
     key = (name, tuple(ins), _frozen(params))
@@ -264,7 +281,7 @@ def _series_rule(builder: _Builder, eqn: Any, ins: list[int]) -> tuple[int, ...]
 
 def _affine(builder: _Builder, eqn: Any, ins: list[int], key: Any) -> tuple[int, ...]:
     rule = rec.Affine(
-        primitive=eqn.primitive, params=eqn.params, series=builder.flags(ins)
+        primitive=eqn.primitive, params=_params(eqn), series=builder.flags(ins)
     )
     avals = [v.aval for v in eqn.outvars]
     return builder.emit(rule, ins, avals, True, key=key)
@@ -291,15 +308,15 @@ def _walk(
             outs = _series_rule(builder, eqn, ins)
         else:
             rule = rec.Fixed(
-                primitive=eqn.primitive, params=eqn.params, series=builder.flags(ins)
+                primitive=eqn.primitive, params=_params(eqn), series=builder.flags(ins)
             )
             outs = builder.emit(rule, ins, [v.aval for v in eqn.outvars], False)
         env.update(zip(eqn.outvars, outs))
     return [read(v) for v in jaxpr.outvars]
 
 
-def _needed(ops: list[Op], output: int) -> tuple[Op, ...]:
-    needed, kept = {output}, []
+def _needed(ops: list[Op], outputs: tuple[int, ...]) -> tuple[Op, ...]:
+    needed, kept = set(outputs), []
     for op in reversed(ops):
         if needed.intersection(op.outs):
             kept.append(op)
@@ -307,24 +324,30 @@ def _needed(ops: list[Op], output: int) -> tuple[Op, ...]:
     return tuple(reversed(kept))
 
 
-def lower(closed_jaxpr: Any) -> Graph:
+def lower(closed_jaxpr: Any, state_size: int | None = None) -> Graph:
     """The graph of `closed_jaxpr`, whose inputs are (t, y, *arg leaves) and
-    whose one output is dy/dt; t and y are the series inputs."""
+    whose one output is dy/dt; t and y are the series inputs. With `state_size`
+    n, a scalar graph: the inputs are (t, y₀, …, yₙ₋₁, *arg scalars) and the n
+    outputs the elements of dy/dt."""
     jaxpr = closed_jaxpr.jaxpr
-    if len(jaxpr.outvars) != 1:
+    scalar = state_size is not None
+    if not scalar and len(jaxpr.outvars) != 1:
         raise TypeError("lagjax.Taylor: the vector field must return one flat array")
+    series_inputs = 1 + (state_size if scalar else 1)
     builder = _Builder()
     const_ids = [builder.constant(c) for c in closed_jaxpr.consts]
     inputs = [
-        builder.new(v.aval, series=position < 2)
+        builder.new(v.aval, series=position < series_inputs)
         for position, v in enumerate(jaxpr.invars)
     ]
-    (output,) = _walk(builder, jaxpr, const_ids, inputs)
+    outputs = tuple(_walk(builder, jaxpr, const_ids, inputs))
     return Graph(
-        ops=_needed(builder.ops, output),
+        ops=_needed(builder.ops, outputs),
         series=frozenset(builder.series),
         constants=builder.constants,
         avals=builder.avals,
         inputs=tuple(inputs),
-        output=output,
+        state=tuple(inputs[1:series_inputs]),
+        outputs=outputs,
+        scalar=scalar,
     )

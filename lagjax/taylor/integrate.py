@@ -105,7 +105,7 @@ def resolve_order(rtol: Any, atol: Any, order: int | None) -> int:
     return order_from_tolerance(min(tolerances))
 
 
-def _two_sum(a: jax.Array, b: jax.Array) -> tuple[jax.Array, jax.Array]:
+def two_sum(a: jax.Array, b: jax.Array) -> tuple[jax.Array, jax.Array]:
     """s + e = a + b exactly, s = fl(a + b) (Knuth's TwoSum)."""
     s = a + b
     b_virtual = s - a
@@ -187,8 +187,8 @@ def taylor_integrate(
         remaining = direction * ((t1 - c.t) - c.t_low)
         last = h >= jax.lax.stop_gradient(remaining)
         tau = direction * jnp.where(last, remaining, h)
-        t_sum, t_err = _two_sum(c.t, tau)
-        t_high, t_low = _two_sum(t_sum, c.t_low + t_err)
+        t_sum, t_err = two_sum(c.t, tau)
+        t_high, t_low = two_sum(t_sum, c.t_low + t_err)
         t_new = jnp.where(last, t1, t_high)
         y_new = horner(coeffs, tau)
         ok = jnp.all(jnp.isfinite(y_new))

@@ -81,7 +81,8 @@ def with_coefficient(x: Any, k: Any, value: jax.Array) -> Any:
     """x with its k-th coefficient set to `value`."""
     if isinstance(x, list):
         return [value if j == k else c for j, c in enumerate(x)]
-    return x.at[k].set(value.astype(x.dtype))
+    # A dynamic update in place (`.at[k].set` would be a scatter).
+    return jax.lax.dynamic_update_index_in_dim(x, value.astype(x.dtype), k, 0)
 
 
 def coefficient(x: jax.Array, k: Any, series: bool) -> jax.Array:

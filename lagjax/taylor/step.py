@@ -47,14 +47,14 @@ def order_from_tolerance(tolerance: float) -> int:
 
 def step_size(coeffs: jax.Array, rtol: Any, atol: Any) -> jax.Array:
     """The step length (positive, possibly inf) from the last two coefficients
-    of `coeffs`, shape (p + 1, n)."""
+    of `coeffs`, shape (p + 1, n), or one per member for a batch (p + 1, n, B)."""
     order = coeffs.shape[0] - 1
     tolerance = jnp.minimum(rtol, atol)
     # max(atol, rtol‖y₀‖)/tol: 1 in absolute mode, the state's size in relative mode.
-    scale = jnp.maximum(atol, rtol * jnp.max(jnp.abs(coeffs[0]))) / tolerance
+    scale = jnp.maximum(atol, rtol * jnp.max(jnp.abs(coeffs[0]), axis=0)) / tolerance
     radii = []
     for j in (order - 1, order):
-        norm = jnp.max(jnp.abs(coeffs[j]))
+        norm = jnp.max(jnp.abs(coeffs[j]), axis=0)
         # A zero coefficient bounds nothing: it allows any step (a polynomial solution).
         safe = jnp.where(norm > 0, norm, 1.0)
         radii.append(jnp.where(norm > 0, (scale / safe) ** (1.0 / j), jnp.inf))
