@@ -30,6 +30,12 @@ starts its solve from a worse guess changes nothing but the iteration count.
 
 Marks are uniform: `lead` steps to mark 0, then `every` steps between marks.
 
+Two walks share this loop. The splittings walk back stage by stage
+(`reversible_splitting`): one linearization per stage serves both the step back
+and the pullback, and the cotangents are summed with Kahan compensation. Every
+other symmetric solver takes a whole step back with −h and then `jax.vjp` of the
+forward step from the state reached (`_GenericWalk`).
+
 References: Gomez, Ren, Urtasun & Grosse, "The reversible residual network:
 backpropagation without storing activations", NeurIPS 2017; Hairer, Lubich &
 Wanner, *Geometric Numerical Integration*, 2nd ed. (2006), §V.1; diffrax issue
@@ -45,6 +51,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from lagjax._integrate.reversible_splitting import SplittingWalk
 from lagjax._integrate.scan_body import (
     TrackingCarry,
     all_finite,
@@ -52,6 +59,7 @@ from lagjax._integrate.scan_body import (
     step_times,
     steps_per_trip,
 )
+from lagjax.solvers.splitting import AbstractSplittingSolver
 
 
 class Clock(NamedTuple):
@@ -141,22 +149,24 @@ def _reversible_run_bwd(residuals, cotangents, perturbed, differentiable, solver
     state_cotangents = _dense_cotangents(cotangents[0], states)
     y0, terms, args = differentiable
     params, static = eqx.partition((terms, args), eqx.is_inexact_array)
+    walk = (
+        SplittingWalk(solver, static, clock)
+        if isinstance(solver, AbstractSplittingSolver)
+        else _GenericWalk(solver, static, clock, y0)
+    )
 
     def at(index, tree):
         return jax.tree_util.tree_map(lambda x: x[index], tree)
 
-    carry = _Backward(
-        at(-1, state_cotangents),
-        _zeros(at(-1, solver_states)),
-        _zeros(params),
-    )
+    last_step = marks.lead + (marks.count - 1) * marks.every
+    carry = walk.start(at(-1, state_cotangents), at(-1, states),
+                       at(-1, solver_states), params, last_step)  # fmt: skip
 
-    def interval(carry: _Backward, inputs):
-        y, state, mark_cotangent, mark = inputs
+    def interval(carry, inputs):
+        y, state, lower_cotangent, mark = inputs
         end = marks.lead + mark * marks.every
-        carry = _steps_back(carry, y, state, end, marks.every, params, static,
-                            solver, clock)  # fmt: skip
-        return carry._replace(y=_add(carry.y, mark_cotangent)), None
+        carry = walk.back(carry, y, state, end, marks.every, params, lower_cotangent)
+        return carry, None
 
     later = (
         at(slice(1, None), states),
@@ -166,10 +176,9 @@ def _reversible_run_bwd(residuals, cotangents, perturbed, differentiable, solver
     )
     carry, _ = jax.lax.scan(interval, carry, later, reverse=True)
     if marks.lead:
-        carry = _steps_back(carry, at(0, states), at(0, solver_states), marks.lead,
-                            marks.lead, params, static, solver, clock)  # fmt: skip
-    y0_cotangent, params_cotangent = _through_init(carry, y0, params, static, solver,
-                                                   clock)  # fmt: skip
+        carry = walk.back(carry, at(0, states), at(0, solver_states), marks.lead,
+                          marks.lead, params, None)  # fmt: skip
+    y0_cotangent, params_cotangent = walk.finish(carry, params)
     gradient = (y0_cotangent, *params_cotangent)
     return jax.tree_util.tree_map(
         lambda g, p: g if p else None, gradient, perturbed, is_leaf=_is_none
@@ -183,6 +192,31 @@ class _Backward(NamedTuple):
     y: Any
     state: Any
     params: Any
+
+
+class _GenericWalk(eqx.Module):
+    """The backward pass of any symmetric solver: a step back with −h, then the
+    pullback of the forward step from the state reached (`jax.vjp` of
+    `solver.step`)."""
+
+    solver: Any
+    static: Any
+    clock: Any
+    y0: Any
+
+    def start(self, cotangent, y, state, params, steps: int) -> _Backward:
+        del y, steps
+        return _Backward(cotangent, _zeros(state), _zeros(params))
+
+    def back(self, carry: Any, y, state, end, length: int, params,
+             saved) -> _Backward:  # fmt: skip
+        carry = _steps_back(carry, y, state, end, length, params, self.static,
+                            self.solver, self.clock)  # fmt: skip
+        return carry if saved is None else carry._replace(y=_add(carry.y, saved))
+
+    def finish(self, carry: Any, params):
+        return _through_init(carry, self.y0, params, self.static, self.solver,
+                             self.clock)  # fmt: skip
 
 
 def _steps_back(carry: _Backward, y, state, end, length, params, static, solver,
