@@ -78,7 +78,7 @@ class PythagoreanThreeBody(AbstractScene):
     Closed forms: the energy $-G\sum_{i<j} m_im_j/r_{ij}(0)$, zero total momentum
     and zero angular momentum, all conserved. Integrate it with
     `lj.TimeTransformed` (the logarithmic Hamiltonian steps in proportion to the
-    closest separation): `TimeTransformed(BlanesMoan4())` at ds = 0.01 keeps the
+    closest separation): `TimeTransformed(Yoshida4())` at ds = 0.005 keeps the
     energy to ~2e-13 to t = 70 (`benchmarks/close_encounters.py`).
     """
 
