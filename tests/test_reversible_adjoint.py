@@ -183,6 +183,24 @@ def test_saved_states_feed_their_cotangents_in_at_their_times():
         assert _relative_gap(reversible(y0, args), expected) < 1e-12
 
 
+@pytest.mark.integration  # ~20 s to compile on the loaded machine: CI's second step
+def test_stage_walk_with_a_driven_potential_and_a_save_at_the_start():
+    # A time-dependent V(q, t) makes every kick's time count, and a save at t0
+    # (no step before it) leaves the first kick of the run pulled back alone.
+    system = lj.SeparableHamiltonian(
+        lambda p: 0.5 * p**2,
+        lambda q, t, k: 0.5 * k * q**2 + 0.3 * q**3 * jnp.cos(1.7 * t),
+    )
+    y0, args = (jnp.asarray(0.6), jnp.asarray(-0.1)), jnp.asarray(1.4)
+    ts = jnp.linspace(0.0, 2.0, 11)  # every 20 steps from step 0
+    expected = jax.grad(_loss(system, lj.Yoshida4(), 0.01, 200, None, ts),
+                        argnums=(0, 1))(y0, args)  # fmt: skip
+    adjoint = lj.ReversibleAdjoint()
+    actual = jax.grad(_loss(system, lj.Yoshida4(), 0.01, 200, adjoint, ts),
+                      argnums=(0, 1))(y0, args)  # fmt: skip
+    assert _relative_gap(actual, expected) < 1e-12
+
+
 def test_gradient_in_a_parameter_matches_finite_differences():
     system = lj.SeparableHamiltonian(
         lambda p: 0.5 * p**2, lambda q, t, g: -g * jnp.cos(q)
