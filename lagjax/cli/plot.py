@@ -10,7 +10,8 @@ Panels that read like a lab notebook, top to bottom:
    e.g. the Foucault pendulum's swing-plane angle against −ω_E sin φ · t, Kepler's
    angular momentum against its constant, the eastward drift against
    ⅓ ω_E g t³ cos φ;
-3. the relative energy change |E − E₀|/|E₀| on a log scale over the whole run —
+3. the relative energy change |E − E₀|/(|E₀| + |p₀·q̇₀|) on a log scale over the
+   whole run —
    the integration error where the energy is conserved (left out for a scene
    with forces, friction or constraints whose diagnostic shows its physics);
 4. where the scene has scalar closed-form checks (`scene.checks(trajectory)`), each
@@ -30,6 +31,8 @@ import equinox as eqx
 import jax
 import numpy as np
 from jax.flatten_util import ravel_pytree
+
+from lagjax.cli.run import energy_report
 
 # The run is cut into this many equal parts, and each scalar check measured on each.
 _SEGMENTS = 6
@@ -78,7 +81,10 @@ def run_figure(name: str, scene: Any, trajectory: Any) -> Any:
     if diagnostic is not None:
         _plot_diagnostic(next(panels), diagnostic, time_label)
     if energy:
-        _plot_energy(next(panels), ts, np.asarray(trajectory.energy()), time_label)
+        scale = energy_report(trajectory).scale
+        _plot_energy(
+            next(panels), ts, np.asarray(trajectory.energy()), scale, time_label
+        )
     if checks:
         _plot_checks(next(panels), checks, time_label)
     figure.tight_layout()
@@ -146,10 +152,13 @@ def _plot_diagnostic(axis, diagnostic, time_label: str) -> None:
     axis.set_xlabel(time_label)
 
 
-def _plot_energy(axis, ts: np.ndarray, energy: np.ndarray, time_label: str) -> None:
-    """The relative change at each save, and its running maximum: a plateau is a
+def _plot_energy(
+    axis, ts: np.ndarray, energy: np.ndarray, scale: float, time_label: str
+) -> None:
+    """The change at each save relative to the energy scale |E₀| + |p₀·q̇₀| (which
+    stays meaningful where E₀ = 0), and its running maximum: a plateau is a
     bounded error (a symplectic solver's), a rising line a drift."""
-    scale = max(abs(float(energy[0])), 1e-300)
+    scale = max(scale, 1e-300)
     # Round-off: a change below half an ulp of E₀ is drawn on that floor, not at 0.
     floor = np.finfo(energy.dtype).eps / 2
     error = np.maximum(np.abs(energy[1:] - energy[0]) / scale, floor)
@@ -157,7 +166,7 @@ def _plot_energy(axis, ts: np.ndarray, energy: np.ndarray, time_label: str) -> N
     axis.semilogy(ts[1:], np.maximum.accumulate(error), lw=1.5, label="largest so far")
     axis.legend(loc="lower right", fontsize="small")
     axis.set_xlabel(time_label)
-    axis.set_ylabel("|E − E₀| / |E₀|")
+    axis.set_ylabel("|E − E₀| / (|E₀| + |p₀·q̇₀|)")
     axis.set_title(
         "energy: relative change (the integration error where E is conserved)",
         fontsize="small",

@@ -25,7 +25,9 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.flatten_util import ravel_pytree
 
+from lagjax._integrate.checks.run_verdict import energy_drift
 from lagjax._integrate.simulate import simulate
 
 # Saved states per run at most: every step of a scene's default run up to 2·10⁴
@@ -72,9 +74,10 @@ def _save_times(t1: float, dt: float | None, spacing: float, points: int) -> np.
     steps = int(np.floor(abs(t1 / dt) + 1e-9))
     stride = max(1, math.ceil(steps / (wanted - 1)))
     grid = np.arange(0, steps + 1, stride) * dt
-    if abs(grid[-1] - t1) > 1e-12 * abs(t1):
-        grid = np.append(grid, t1)
-    return grid
+    # k·dt can land an ulp past t1 (1000 · 1e-9 = 1.0000000000000002e-6): such a
+    # time is t1 itself, and no save may lie outside the run.
+    grid = grid[np.abs(grid) < abs(t1) * (1 - 1e-12)]
+    return np.append(grid, t1)
 
 
 def _pieces(times: np.ndarray, dt: float | None) -> list[np.ndarray]:
@@ -171,3 +174,100 @@ def _joined(pieces: list, batch: int | None):
         lambda *parts: along(list(parts)), *[p.ys for p in pieces]
     )
     return eqx.tree_at(lambda t: (t.ts, t.ys), pieces[0], (ts, ys))
+
+
+# -- scales float64 can carry --------------------------------------------------------
+
+# A parameter beyond 1e±100 leaves float64's range (1e±308) once the equations
+# multiply three of them or square a product (p = m l² θ̇, then p² in T): with
+# mass = 1e-300 the pendulum's p² underflows to 0 and the energy report read 2.15.
+PARAMETER_RANGE = (1e-100, 1e100)
+# The energy scale |E0| + |p0·q̇0| at the start: squares of it must stay normal.
+ENERGY_RANGE = (1e-150, 1e150)
+
+
+def check_scales(scene) -> None:
+    """Refuse, before any run, parameters or a starting energy whose size float64
+    cannot carry through the equations (`UsageError` naming them)."""
+    low, high = PARAMETER_RANGE
+    for field in dataclasses.fields(scene):
+        value = getattr(scene, field.name)
+        if not isinstance(value, (jax.Array, np.ndarray, float, int)):
+            continue
+        sizes = np.abs(np.asarray(value, dtype=float))
+        sizes = sizes[sizes > 0]
+        if sizes.size and (sizes.min() < low or sizes.max() > high):
+            raise UsageError(
+                f"--param {field.name}={_shown(value)}: outside {low:.0e}..{high:.0e} "
+                "in size, float64 cannot carry it through the equations (products "
+                "such as p² = (m l² θ̇)² underflow to 0 or overflow to inf, and the "
+                "energy report would be meaningless); choose units in which the "
+                "parameters are nearer 1"
+            )
+    q0, second0 = scene.initial_state()
+    energy, scale = _start_energy(scene, q0, second0, 0.0, scene)
+    low, high = ENERGY_RANGE
+    if not np.isfinite(scale) or (scale > 0 and not low <= scale <= high):
+        raise UsageError(
+            f"the scene's energy scale at the start, |E0| + |p0·q̇0| = {scale:.3g} "
+            f"(E0 = {energy:.3g}), is outside {low:.0e}..{high:.0e}: float64 cannot "
+            "square it, so the run's energy report would be meaningless; choose "
+            "units (parameters) in which the energy is nearer 1"
+        )
+
+
+def _shown(value) -> str:
+    flat = np.ravel(np.asarray(value, dtype=float))
+    return ",".join(f"{x:g}" for x in flat)
+
+
+def _start_energy(system, q, second, t=0.0, args=None) -> tuple[float, float]:
+    """(E0, |E0| + |p0·q̇0|) at a state (a scene is its own args)."""
+    energy, scale = _energy_and_scale(system, q, second, t, args)
+    return float(energy), float(scale)
+
+
+@eqx.filter_jit
+def _energy_and_scale(system, q, second, t, args):
+    energy = system.state_energy(q, second, t, args)
+    velocity = ravel_pytree(system.state_velocity(q, second, t, args))[0]
+    momentum = ravel_pytree(system.state_momentum(q, second, t, args))[0]
+    # p and q̇ unpaired (a rigid body: 3 momenta, 4 quaternion rates): |E0| alone
+    rate = momentum @ velocity if velocity.shape == momentum.shape else 0.0
+    return energy, jnp.abs(energy) + jnp.abs(rate)
+
+
+@dataclasses.dataclass
+class EnergyReport:
+    """How the energy of a run behaved: `drift` = max |E − E0| / scale where the
+    scene conserves it (NaN where it does not: forces, damping, a drive)."""
+
+    change: float
+    drift: float
+    scale: float
+
+    def line(self) -> str:
+        if np.isfinite(self.drift):
+            return f"energy    max relative error {self.drift:.2e}"
+        return (
+            f"energy    not conserved by this scene (forces, damping, constraints or "
+            f"a drive): changed by {self.change:.2e} of its scale {self.scale:.3g}"
+        )
+
+
+def energy_report(trajectory) -> EnergyReport:
+    """The energy figures of a single (unbatched) trajectory, relative to the
+    scale |E0| + |p0·q̇0| (`lagjax._integrate.checks.run_verdict`), which stays
+    meaningful where E0 is 0."""
+    start = jax.tree_util.tree_map(lambda x: x[0], trajectory.ys)
+    t0 = trajectory.ts[0]
+    q0, second0 = start
+    _, scale = _start_energy(trajectory.system, q0, second0, t0, trajectory.args)
+    drift = _drift(trajectory.system, start, t0, trajectory.ts, trajectory.ys,
+                   trajectory.args)  # fmt: skip
+    energy = np.asarray(trajectory.energy())
+    change = float(np.max(np.abs(energy - energy[0]))) / max(scale, 1e-300)
+    return EnergyReport(change, float(drift), scale)
+
+
+_drift = eqx.filter_jit(energy_drift)

@@ -38,6 +38,7 @@ from lagjax._linalg.small_gradient import small_gradient
 from lagjax.mechanics.abstract_hamiltonian import (
     AbstractHamiltonian as AbstractHamiltonian,
 )
+from lagjax.mechanics.captured_globals import warn_captured_numbers
 from lagjax.mechanics.declared_structure import check_declared_quadratic
 from lagjax.mechanics.functions import as_system_function
 from lagjax.mechanics.lagrangian import Lagrangian
@@ -89,6 +90,13 @@ class Hamiltonian(AbstractUserHamiltonian):
 
     `quadratic_in_momentum=True` declares H at most quadratic in p, making the
     Legendre transform to L a single linear solve.
+
+    H is compiled once and reused: numbers it reads from module globals are frozen
+    at their value of the first run (rebinding them later changes nothing). Pass
+    numbers that vary through `args`; a `CapturedNumberWarning` is raised here when
+    H reads a module-level number not named in UPPER_CASE
+    (`lagjax.mechanics.captured_globals`). The same holds for `SeparableHamiltonian`'s
+    T and V.
     """
 
     function: Callable = eqx.field(converter=as_system_function)
@@ -98,6 +106,7 @@ class Hamiltonian(AbstractUserHamiltonian):
     def __init__(self, H: Callable, *, quadratic_in_momentum: bool = False):
         self.function = H
         self.arity = positional_arity(H, minimum=2, maximum=4, what="the Hamiltonian H")
+        warn_captured_numbers(H, "the Hamiltonian H")
         self.quadratic_in_momentum = quadratic_in_momentum
 
     def __call__(self, q: Any, p: Any, t: Any = 0.0, args: Any = None) -> jax.Array:
@@ -133,6 +142,8 @@ class SeparableHamiltonian(AbstractUserHamiltonian):
         self.potential_arity = positional_arity(
             V, minimum=1, maximum=3, what="the potential energy V"
         )
+        warn_captured_numbers(T, "the kinetic energy T")
+        warn_captured_numbers(V, "the potential energy V")
         self.quadratic_in_momentum = quadratic_in_momentum
 
     def default_method(self, dt: Any) -> DefaultMethod:

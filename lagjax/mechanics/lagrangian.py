@@ -38,6 +38,7 @@ from lagjax._core.terms import (
     RattleTerm,
 )
 from lagjax._linalg.small_solves import singular_check as singular_check
+from lagjax.mechanics.captured_globals import warn_captured_numbers
 from lagjax.mechanics.constraints import (
     Constraints,
     constrained_motion,
@@ -90,6 +91,15 @@ class Lagrangian(AbstractSystem):
       Module with trainable arrays), else `"closed_form"`.
 
     `t` defaults to 0.0 and `args` to None in every method.
+
+    **What is compiled, and when.** `simulate` compiles L once and reuses the
+    program for every later run with the same function: numbers L reads from
+    module globals (`g = 9.81` used inside L) are frozen at their value of the
+    first run, and rebinding them later silently changes nothing. Pass numbers
+    that vary through `args` (`L(q, qdot, t, args)`, `simulate(..., args=...)`),
+    which are traced: a new value reuses the compilation. A `CapturedNumberWarning`
+    is raised here when L (or `force`, `dissipation`) reads a module-level number
+    whose name is not UPPER_CASE (`lagjax.mechanics.captured_globals`).
     """
 
     function: Callable = eqx.field(converter=as_system_function)
@@ -114,6 +124,9 @@ class Lagrangian(AbstractSystem):
     ):
         self.function = L
         self.arity = positional_arity(L, minimum=2, maximum=4, what="the Lagrangian L")
+        warn_captured_numbers(L, "the Lagrangian L")
+        warn_captured_numbers(force, "the force Q")
+        warn_captured_numbers(dissipation, "the dissipation function D")
         self.force = force
         self.force_arity = (
             0

@@ -52,6 +52,7 @@ from jax.flatten_util import ravel_pytree
 from lagjax.mechanics import stability
 from lagjax.mechanics.constrained_modes import reduce_to_constraint_surface
 from lagjax.mechanics.lagrangian import Lagrangian
+from lagjax.mechanics.lagrangian_argument import as_lagrangian
 
 # ‖Ĝ‖ below this fraction of √‖K̂‖ (both in mass-normalised coordinates, 1/time)
 # counts as no gyroscopic coupling: its first-order effect on the frequencies is
@@ -83,6 +84,7 @@ def equilibrium(
     Raises if Newton's method does not converge. For rotating frames, forces and
     constraints see `relative_equilibrium`.
     """
+    lag, args = as_lagrangian(lag, args, "equilibrium")
     q_flat, unravel = ravel_pytree(q_guess)
 
     def residual(x, _):
@@ -251,6 +253,14 @@ def _expansion(lag: Lagrangian, q_eq: Any, args: Any, t: Any) -> _Expansion:
     )
 
 
+def _refuse_no_coordinates(q_eq: Any) -> None:
+    if ravel_pytree(q_eq)[0].size == 0:
+        raise ValueError(
+            "q_eq has no coordinates (size 0): normal modes need at least one; pass "
+            "the equilibrium with one entry per coordinate, e.g. jnp.array([0.0])"
+        )
+
+
 def _refuse_unsupported(lag: Lagrangian) -> None:
     """Trace-time refusal of systems whose small oscillations are not M, G, K."""
     if lag.force is not None or lag.dissipation is not None:
@@ -320,8 +330,12 @@ def normal_modes(
     Holonomic constraints are honoured: the modes live on the constraint surface
     (`lagjax.mechanics.constrained_modes`; fewer modes than coordinates, shapes in
     the full coordinates). Forces, dissipation and velocity constraints are refused
-    with a pointer to `linearize`.
+    with a pointer to `linearize`. A scene whose system is a Lagrangian is taken
+    with itself as `args`; a Hamiltonian, a rigid body or a plain function is
+    refused by name, with the way to get a Lagrangian (`ham.to_lagrangian()`).
     """
+    lag, args = as_lagrangian(lag, args, "normal_modes")
+    _refuse_no_coordinates(q_eq)
     _refuse_unsupported(lag)
     q_flat = ravel_pytree(q_eq)[0]
     expansion = _expansion(lag, q_eq, args, t)

@@ -2,8 +2,8 @@
 
 The `y0` half of `simulate`'s input checks (`lagjax._integrate.checks.inputs` has the rest and
 its table of refusals): a pair of matching real arrays — q and its partner (q̇ or p)
-of one structure and shape, finite, float32/64 (integers converted, half precision
-refused); a rigid body's (quaternion of shape (4,), nonzero; Π of shape (3,)); a
+of one structure and shape, at least one coordinate, finite, float32/64 (integers
+converted, half precision refused); a rigid body's (quaternion of shape (4,), nonzero; Π of shape (3,)); a
 scene's state of the shapes its `initial_state()` has; a constrained Lagrangian's
 start on its constraints. Values are checked only when concrete (not traced).
 """
@@ -33,6 +33,7 @@ def check_initial_state(system: AbstractSystem, y0: Any) -> Any:
         )
     first, second = y0
     _check_leaf_types(y0)
+    _check_has_coordinates(first)
     y0 = system.checked_state_pair(first, second)
     _check_finite(y0)
     return _floated(y0)
@@ -43,7 +44,7 @@ def _check_leaf_types(y0: Any) -> None:
     if not leaves:
         raise ValueError("y0 has no numbers in it: pass (q0, qdot0) or (q0, p0)")
     for leaf in leaves:
-        dtype = jnp.result_type(leaf)
+        dtype = _dtype_of_number(leaf)
         if dtype == jnp.bool_:
             raise TypeError("y0 contains booleans; pass numbers (floats)")
         if jnp.issubdtype(dtype, jnp.complexfloating):
@@ -60,6 +61,35 @@ def _check_leaf_types(y0: Any) -> None:
             )
         if not jnp.issubdtype(dtype, jnp.number):
             raise TypeError(f"y0 must hold numbers, got dtype {dtype}")
+
+
+def _dtype_of_number(leaf: Any) -> Any:
+    """The dtype of a numeric leaf; a string ("float32" reads as a dtype name),
+    bytes or another object is refused by name."""
+    if not isinstance(leaf, (str, bytes)):
+        try:
+            return jnp.result_type(leaf)
+        except TypeError:
+            pass
+    raise TypeError(
+        f"y0 must hold numbers, got {type(leaf).__name__} {leaf!r:.40}; pass floats "
+        "or arrays (a number read from text: float(text))"
+    )
+
+
+def _check_has_coordinates(q0: Any) -> None:
+    """q0 must hold at least one number: a system of no coordinates has no motion,
+    and the loops' reductions (the largest |y|, a matrix of size 0) have no
+    identity to start from."""
+    sizes = [np.size(leaf) for leaf in jax.tree_util.tree_leaves(q0)]
+    if sum(sizes) == 0:
+        shapes = [tuple(np.shape(x)) for x in jax.tree_util.tree_leaves(q0)]
+        raise ValueError(
+            f"q0 has no coordinates (shape {shapes[0] if len(shapes) == 1 else shapes}"
+            "): a system needs at least one; pass q0 with one entry per coordinate, "
+            "e.g. jnp.array([0.1]) for one (an empty array often comes from slicing "
+            "or from jnp.zeros(n) with n = 0)"
+        )
 
 
 def _check_finite(y0: Any) -> None:

@@ -11,10 +11,13 @@ are checked. Every refusal names the problem and what to do instead:
 | `system` | not a lagjax system (a bare function, a class, …) | `Lagrangian(L)`, `Hamiltonian(H)`, `Scene()` |
 | `solver` | a class, a string, a non-solver, an SDE or IMEX solver | `Tsit5()`, a lagjax solver instance |
 | `max_steps` | not a positive integer | a positive `int` or None |
-| `t0`, `t1`, `dt` | NaN, inf, not a real number; `dt = 0`; more than 10⁹ steps; `dt` under 10³ ulps of the largest time | finite times, a larger `dt`, time shifted to start at 0 |
+| `t0`, `t1`, `dt` | NaN, inf, not a real number; `dt = 0`; more than 10⁹ steps; `dt` under 64 ulps of the largest time | finite times, a larger `dt`, time shifted to start at 0 |
+| `t0`, `t1` (adaptive) | a span under 64 ulps of the largest time (t0 = 1e15, t1 = t0 + 1) | time shifted to start at 0 |
+| `rtol`, `atol` (adaptive) | both under ε/100 of the working precision (float32 at 1e-12) | rtol ≥ 10 ε, or float64 |
+| `args` | a NaN anywhere (infinities are allowed) | finite parameters |
 | `y0` | float64 arrays while JAX's x64 mode is off (a warning) | `jax.config.update("jax_enable_x64", True)` |
 | `ts` | NaN, not 1-D, unsorted, outside [t0, t1] | sorted times inside the span |
-| `y0` | not a pair; q and its partner of different structure or shape; NaN/inf; float16; complex or boolean | `(q0, qdot0)` / `(q0, p0)` of matching shapes, float32/64 |
+| `y0` | not a pair; q and its partner of different structure or shape; no coordinates (q0 of size 0); NaN/inf; float16; complex or boolean | `(q0, qdot0)` / `(q0, p0)` of matching shapes, float32/64 |
 | `y0` of a `RigidBody` | quaternion not of shape (4,), zero; momentum not (3,) | a unit quaternion, e.g. `(1, 0, 0, 0)` |
 | `rtol`, `atol` | NaN, negative, or both zero | positive tolerances |
 | `y0` of a constrained `Lagrangian` | off the constraints (residuals named) | a start on the manifold |
@@ -52,6 +55,8 @@ from lagjax._integrate.checks.initial_state import (
 # More steps than this cannot finish in a session (at ~10 ns a step, 10⁹ steps
 # take 10 s for the cheapest system; a typical one takes minutes).
 MAX_FIXED_STEPS = 10**9
+# The smallest normal float64: a span below it is subnormal, steps in it lose bits.
+_TINY = float(np.finfo(np.float64).tiny)
 
 _IMEX_SOLVERS = (diffrax.KenCarp3, diffrax.KenCarp4, diffrax.KenCarp5, diffrax.Sil3)
 
@@ -82,10 +87,13 @@ def check_simulate_inputs(
     check_tolerances(rtol, atol)
     check_times(t0, t1, dt)
     check_save_times(ts, t0, t1)
-    del args  # a scene's parameters are its fields; nothing to check in args
+    check_args_not_nan(args)
     warn_float64_without_x64(y0)
     y0 = check_initial_state(system, y0)
-    check_time_resolution(t0, t1, dt, working_dtype(y0))
+    dtype = working_dtype(y0)
+    check_time_resolution(t0, t1, dt, dtype)
+    if dt is None:
+        check_tolerance_resolution(rtol, atol, dtype)
     return y0
 
 
@@ -204,6 +212,12 @@ def check_times(t0: Any, t1: Any, dt: Any) -> None:
             )
     if start is not None and start == end:
         raise ValueError(f"t1 must differ from t0, both are {start}")
+    if start is not None and end is not None and abs(end - start) < _TINY:
+        raise ValueError(
+            f"the span t1 - t0 = {end - start:g} is below the smallest normal float "
+            f"({_TINY:g}): no step can resolve it; give a span of a meaningful size "
+            "(choose units in which the times are nearer 1)"
+        )
     if step is None:
         return
     if step == 0:
@@ -239,23 +253,37 @@ _STEP_IN_ULPS = 64
 def check_time_resolution(t0: Any, t1: Any, dt: Any, dtype: Any) -> None:
     """Refuse a `dt` the run's time cannot resolve (t0 = 1e15, dt = 0.01 in float64:
     the times round to steps of 0 or 0.125, and the answer silently differs from
-    the same run started at 0)."""
-    if dt is None:
+    the same run started at 0); without `dt`, a span the adaptive steps cannot
+    resolve (t0 = 1e15, t1 = t0 + 1: 8 ulps wide, and a step shorter than half an
+    ulp leaves t where it was, so the controller shrinks it until max_steps)."""
+    times = [_concrete_scalar(x, n) for x, n in ((t0, "t0"), (t1, "t1"))]
+    step = None if dt is None else _concrete_scalar(dt, "dt")
+    if any(x is None for x in times) or (dt is not None and step is None):
         return
-    times = [_concrete_scalar(x, n) for x, n in ((t0, "t0"), (t1, "t1"), (dt, "dt"))]
-    if any(x is None for x in times):
-        return
-    start, end, step = typing.cast(list[float], times)
+    start, end = typing.cast(list[float], times)
     largest = max(abs(start), abs(end))
     ulp = float(np.spacing(np.asarray(largest, dtype=dtype)))
-    if abs(step) >= _STEP_IN_ULPS * ulp:
+    if step is None:
+        if abs(end - start) >= _STEP_IN_ULPS * ulp:
+            return
+        problem = (
+            f"the span [{start:g}, {end:g}] is only {abs(end - start) / ulp:.3g} ulps "
+            f"of t wide in {np.dtype(dtype)} (one ulp there is {ulp:g}): adaptive "
+            "steps shorter than an ulp cannot advance t, and the run would stall"
+        )
+    elif abs(step) >= _STEP_IN_ULPS * ulp:
         return
+    else:
+        problem = (
+            f"dt = {step:g} is too fine for times near {largest:g} in "
+            f"{np.dtype(dtype)} (one ulp of t there is {ulp:g}): the grid t0 + k·dt "
+            "would round each step to a multiple of that ulp, and the run would "
+            "take steps of the wrong length"
+        )
     raise ValueError(
-        f"dt = {step:g} is too fine for times near {largest:g} in {np.dtype(dtype)} "
-        f"(one ulp of t there is {ulp:g}): the grid t0 + k·dt would round each step "
-        "to a multiple of that ulp, and the run would take steps of the wrong "
-        "length. Shift time so the run starts at 0 (t0=0, t1=t1-t0; a system that "
-        "uses t can take the offset through args), or use a larger dt"
+        f"{problem}. Shift time so the run starts at 0 (t0=0, t1=t1-t0; a system "
+        "that uses t can take the offset through args)"
+        + (", or use a larger dt" if step is not None else "")
         + (", or run in float64 (y0 as float64, with "
            "jax.config.update('jax_enable_x64', True))"
            if np.dtype(dtype).itemsize < 8 else "")
@@ -275,6 +303,60 @@ def warn_float64_without_x64(y0: Any) -> None:
             "program, before any JAX array is made",
             stacklevel=3,
         )
+
+
+# An adaptive run's tolerances must stay above this fraction of the working
+# precision's ε. Measured on float32 (ε = 1.2e-7), oscillator to t = 10: at 1e-8
+# (the default) Tsit5 takes 95 steps and is good to 1e-7; at 1e-10 Dopri8 takes
+# 12 837 steps and its error grows to 2e-6 (round-off of the many steps); at
+# 1e-11 it stalls at max_steps. Below ε/100 no digit is gained and the run only
+# slows down or stalls.
+_TOLERANCE_IN_EPS = 1e-2
+
+
+def check_tolerance_resolution(rtol: Any, atol: Any, dtype: Any) -> None:
+    """Refuse adaptive tolerances the working precision cannot meet (float32 at
+    rtol = atol = 1e-12: the error estimate is round-off, every step is
+    rejected, and the run ends at max_steps with the wrong remedy)."""
+    values = [_concrete_scalar(x, n) for x, n in ((rtol, "rtol"), (atol, "atol"))]
+    eps = float(np.finfo(dtype).eps)
+    floor = _TOLERANCE_IN_EPS * eps
+    if any(x is None or x >= floor for x in values):
+        return
+    precision = np.dtype(dtype)
+    raise ValueError(
+        f"rtol = {values[0]:g} and atol = {values[1]:g} are below the resolution "
+        f"of {precision} (ε = {eps:.3g}): no step can meet them, so an adaptive "
+        f"run would stall until max_steps. Pass rtol ≥ {10 * eps:.1g} (results "
+        f"are good to about ε at best)"
+        + (" or run in float64 (y0 as float64, with "
+           "jax.config.update('jax_enable_x64', True))"
+           if precision.itemsize < 8 else "")
+    )  # fmt: skip
+
+
+def check_args_not_nan(args: Any) -> None:
+    """Refuse concrete `args` holding NaN: a NaN parameter makes every rate NaN,
+    and an adaptive run then rejects every step until max_steps (whose message
+    would wrongly say to raise it). Infinite values are left alone: a cutoff or
+    wall at infinity can be meant; a run they break is flagged as non-finite."""
+    paths = jax.tree_util.tree_flatten_with_path(args)[0]
+    for path, leaf in paths:
+        if isinstance(leaf, (Tracer, bool, int, str)):
+            continue
+        try:
+            values = np.asarray(leaf)
+        except (TypeError, ValueError):
+            continue
+        if not np.issubdtype(values.dtype, np.inexact):
+            continue
+        if np.any(np.isnan(values)):
+            name = "args" + jax.tree_util.keystr(path)
+            raise ValueError(
+                f"{name} contains NaN ({values if values.size < 8 else 'array'}): "
+                "the equations of motion would be NaN everywhere. Pass finite "
+                "parameters (a NaN often comes from a computed value: check it)"
+            )
 
 
 def check_save_times(ts: Any, t0: Any, t1: Any) -> None:
