@@ -40,6 +40,15 @@ with checkpoints; diffrax's checkpointed loop differs from the scan by 4e-7 at
 10⁶ steps, its times rounded otherwise). At 10⁴ steps it takes 0.95× (SV) and
 0.33× (Yoshida4) the scan's gradient time.
 
+On an idle core (the device machine's CPU, JAX 0.11.2, one pinned core, minima
+of 9) at 10⁶ steps the reversible gradient takes 2.96× the forward run
+(Störmer–Verlet, 28 ms forward) and 3.19× (Yoshida4, 73 ms), 2.90× and 3.14×
+with checkpoints every 1000 steps (147 KiB of temporaries); the stage-by-stage
+walk of the splittings measured the same as the generic step-back-then-vjp walk
+(3.03×, 3.17×) there. For the gap column at 10⁶ steps mind that the scan's own
+reverse-mode gradient is 1–3e-10 from a long-double reference
+(`benchmarks/adjoint_round_off.py`).
+
 Memory is XLA's temporary buffer size of the compiled gradient
 (`memory_analysis().temp_size_in_bytes`); time is the median and the minimum of
 repeats, variants alternated in rotating order (on a shared machine the minimum is

@@ -30,7 +30,12 @@ that of the plain sum (the compensation's is zero). In float64 the gradients
 agree with the plain scan's to ~1e-14 relative at 10³ steps
 (`tests/test_reversible_adjoint.py`). `checkpoints=K` keeps the state every K
 steps (the saved states are kept anyway) and restarts the walk back from each, so
-the error is that of at most K steps, for n/K states of memory: use it in float32
+the error is that of at most K steps, for n/K states of memory. Kepler over 10⁶
+float64 steps, against a long-double reference of the same map
+(`benchmarks/adjoint_round_off.py`): 1.6e-9 (Störmer–Verlet) and 5.9e-9
+(Yoshida4) relative without checkpoints, 2.2e-11 with K = 1000 (147 KiB of
+temporaries instead of 7), where reverse mode through the stored scan is itself
+2.8e-10 and 1.2e-10 off; use K ≈ 1000 for runs of 10⁵ steps and more, and in float32
 (uncompensated Störmer–Verlet on Kepler, 2·10⁴ steps: 6.7e-3 relative to the
 plain scan's float32 gradient without checkpoints, 5.8e-4 with K = 10, where
 the plain scan is itself 1.7e-3 from float64) or for very long runs. A failed
