@@ -149,3 +149,28 @@ def test_unstack_is_translated_on_every_axis():
     pars = np.repeat(k[:, None], 10, axis=1)
     heyoka_values = rhs(np.ascontiguousarray(states.T), pars=pars).T
     np.testing.assert_allclose(heyoka_values, expected, rtol=1e-14, atol=1e-14)
+
+
+def test_selects_with_numeric_predicates_pick_their_case():
+    """`where` and `select_n` whose predicate is a number pick a case per element
+    (translated by NumPy, no JAX call), on expressions and on numbers alike."""
+
+    def selects(t, y, args):
+        which = jnp.array([0, 2, 1])
+        picked = jax.lax.select_n(which, y, 2 * y, y**2)
+        numbers = jax.lax.select_n(which > 0, jnp.arange(3.0), jnp.ones(3))
+        scalar = jax.lax.select_n(jnp.asarray(1), y, jnp.sin(y))
+        return (
+            jnp.where(jnp.array([True, False, True]), y, -y) + picked + numbers + scalar
+        )
+
+    system = jaxpr_to_heyoka(selects, 3)
+    rhs = hy.cfunc([f for _, f in system.equations], [y for y, _ in system.equations])
+    y = np.random.default_rng(2).normal(size=(3, 7))
+    expected = (
+        np.where([[True], [False], [True]], y, -y)
+        + np.stack([y[0], y[1] ** 2, 2 * y[2]])
+        + np.array([[0.0], [1.0], [1.0]])
+        + np.sin(y)
+    )
+    np.testing.assert_allclose(rhs(y), expected, rtol=1e-15, atol=1e-15)

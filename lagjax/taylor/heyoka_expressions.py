@@ -50,15 +50,13 @@ import numpy as np
 
 from lagjax._linalg.jaxpr_interpreter import evaluate_jaxpr
 from lagjax.taylor.heyoka_control import CONTROL_RULES
+from lagjax.taylor.heyoka_moves import DATA_MOVES, bind, move
 from lagjax.taylor.heyoka_rules import (
-    DATA_MOVES,
     SYMBOLIC_RULES,
     UnsupportedPrimitiveError,
     as_expression,
-    bind,
     element_map,
     elementwise_rules,
-    move,
     symbolic,
 )
 
