@@ -22,6 +22,7 @@ import dataclasses
 import logging
 import math
 import os
+import re
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -35,7 +36,14 @@ from lagjax import scenes as scene_catalog
 from lagjax._core.cpu_loops import enable_fast_cpu_loops
 from lagjax._integrate.checks.inputs import check_times
 from lagjax._integrate.solver_choice import default_solver
-from lagjax.cli.run import Outcome, UsageError, first_line, run_scene
+from lagjax.cli.run import (
+    Outcome,
+    UsageError,
+    check_scales,
+    energy_report,
+    first_line,
+    run_scene,
+)
 from lagjax.cli.sweep import add_sweep_command
 from lagjax.solvers.implicit import (
     AbstractGaussLegendre,
@@ -109,7 +117,13 @@ def _build_scene(name: str, params: Sequence[str]):
     if name not in catalog:
         raise UsageError(f"unknown scene {name!r}; `lagjax scenes` lists them")
     scene_class = catalog[name]
-    values = dict(_parse_param(text) for text in params)
+    pairs = [_parse_param(text) for text in params]
+    values = dict(pairs)
+    if len(values) < len(pairs):
+        twice = next(k for k in values if sum(key == k for key, _ in pairs) > 1)
+        raise UsageError(
+            f"--param {twice} is given more than once; give each parameter once"
+        )
     default = scene_class()
     fields = {field.name for field in dataclasses.fields(scene_class)}
     for key, value in values.items():
@@ -156,6 +170,13 @@ def _options(scene, args) -> tuple[float, float | None, Any]:
         raise UsageError(
             f"--t1 {t1} is before t0 = 0; pass --backward to run backwards"
         )
+    if dt is not None and dt > abs(t1):
+        step = f"--dt {dt:g}" if args.dt is not None else f"the scene's step {dt:g}"
+        raise UsageError(
+            f"{step} is longer than the run (--t1 {t1:g}): the run would be one "
+            f"step of {abs(t1):g}, not of dt; pass --dt at most {abs(t1):g} (a "
+            "scene's own step is a small fraction of its period)"
+        )
     if args.backward:
         t1, dt = -abs(t1), None if dt is None else -abs(dt)
     try:
@@ -193,6 +214,22 @@ def _check_output(path: str | None, flag: str) -> None:
         _check_plot_format(target, flag)
 
 
+def _check_distinct_outputs(save: str | None, plot: str | None) -> None:
+    """`--save` and `--plot` naming one file would write the picture over the data
+    (and report both written)."""
+    if save is None or plot is None:
+        return
+    same = Path(save).resolve() == Path(plot).resolve()
+    if not same and Path(save).exists() and Path(plot).exists():
+        same = os.path.samefile(save, plot)
+    if same:
+        raise UsageError(
+            f"--save {save} and --plot {plot} name the same file: the figure would "
+            "overwrite the data; give them different names (e.g. run.npz and "
+            "run.png)"
+        )
+
+
 def _check_plot_format(target: Path, flag: str) -> None:
     try:
         import matplotlib
@@ -223,15 +260,15 @@ def _first_of_batch(trajectory, batch: int | None):
 
 def _summary(scene, name: str, outcome: Outcome, batch: int | None) -> list[str]:
     first = _first_of_batch(outcome.trajectory, batch)
-    energy = np.asarray(first.energy())
-    scale = max(abs(energy[0]), 1e-300)
+    ts = np.asarray(first.ts)
     lines = [
         f"scene     {name}: {first_line((type(scene).__doc__ or '').strip())}",
         f"solver    {first.stats['solver']}, {outcome.steps} steps"
-        + ("" if batch is None else f", batch of {batch}"),
+        + ("" if batch is None else f", batch of {batch}")
+        + (f", backward from t = 0 to {ts[-1]:g}" if ts[-1] < ts[0] else ""),
         f"time      run {outcome.run_time:.3f} s (excluding compile), "
         f"compile {outcome.compile_time:.2f} s",
-        f"energy    max relative error {np.max(np.abs(energy - energy[0])) / scale:.2e}",
+        energy_report(first).line(),
     ]
     try:
         checks = scene.checks(first)
@@ -280,6 +317,8 @@ def _command_run(args) -> int:
     t1, dt, solver = _options(scene, args)
     _check_output(args.plot, "--plot")
     _check_output(args.save, "--save")
+    _check_distinct_outputs(args.save, args.plot)
+    check_scales(scene)
     try:
         outcome = run_scene(scene, t1, dt, solver, args.batch)
     except (UsageError, KeyboardInterrupt):
@@ -409,6 +448,18 @@ class RunFailed(Exception):
 def _reason(error: Exception, scene=None, solver=None, dt=None) -> str:
     """The line of an (often long, JIT-wrapped) error message that says what failed;
     for a failed implicit stage solve, what to change (`stage_failure_message`)."""
+    return _command_remedies(_library_reason(error, scene, solver, dt))
+
+
+def _command_remedies(text: str) -> str:
+    """`text` without the sentences that name library-only remedies (a command's
+    user cannot pass throw=False or read an exception's .trajectory)."""
+    sentences = re.split(r"(?<=\.)\s+", text)
+    kept = [s for s in sentences if "throw=False" not in s and ".trajectory" not in s]
+    return " ".join(kept) if kept else text
+
+
+def _library_reason(error: Exception, scene=None, solver=None, dt=None) -> str:
     text = str(error)
     if scene is not None and ("nonlinear solver" in text or "Nonfinite" in text):
         chosen = solver if solver is not None else default_solver(scene, dt)
