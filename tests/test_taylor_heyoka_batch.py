@@ -88,9 +88,12 @@ def test_run_taylor_batch_has_a_leading_batch_axis():
 
 
 def test_a_failed_member_is_told_by_its_result():
+    """Under `jit` (as `lj.sweep` runs it): one XLA compilation, where the eager
+    `vmap` of the test above compiles each operation of the run."""
     y0s = (AMPLITUDES, jnp.zeros_like(AMPLITUDES))
     few = lj.Taylor(backend="heyoka", rtol=1e-15, atol=1e-15, max_steps=3)
-    batch = run_taylor_batch(PENDULUM, y0s, None, 0.0, 2.0, None, few, 1e-15,
-                             1e-15, 3, False, args=G)  # fmt: skip
+    batch = jax.jit(lambda y0s: run_taylor_batch(PENDULUM, y0s, None, 0.0, 2.0,
+                                                 None, few, 1e-15, 1e-15, 3, False,
+                                                 args=G))(y0s)  # fmt: skip
     assert not np.any(batch.stats["succeeded"])
     assert np.all(batch.result == diffrax.RESULTS.max_steps_reached)
