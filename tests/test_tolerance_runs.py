@@ -51,3 +51,16 @@ def test_low_order_solver_at_tight_tolerance_is_told_to_use_a_higher_order():
     with pytest.raises(lj.SimulationError, match="Dopri8"):
         lj.simulate(oscillator(), (1.0, 0.0), t1=100.0, rtol=1e-13, atol=1e-13,
                     solver=diffrax.Tsit5(), max_steps=50)  # fmt: skip
+
+
+def test_a_tolerance_given_to_a_scene_asks_for_a_tolerance_run():
+    # A scene's default run steps by its default_dt; a tolerance given with no
+    # solver must control the error instead of tuning only the stage solves.
+    pendulum = lj.scenes.HarmonicOscillator()  # a separable H: Yoshida4 by default
+    y0 = pendulum.initial_state()
+    default = lj.simulate(pendulum, y0, t1=5.0)
+    tolerance = lj.simulate(pendulum, y0, t1=5.0, rtol=1e-12, atol=1e-12)
+    assert tolerance.stats["solver"] == "Dopri8"
+    assert default.stats["solver"] != "Dopri8"  # its fixed-step default
+    q_exact, _ = pendulum.exact_solution(jnp.asarray(5.0))
+    np.testing.assert_allclose(tolerance.q[-1], q_exact, atol=1e-10)

@@ -77,6 +77,8 @@ from lagjax.taylor.solver import Taylor
 from lagjax.trajectory import Trajectory
 
 System = AbstractSystem
+# rtol and atol when neither is given.
+DEFAULT_TOLERANCE = 1e-8
 
 
 def simulate(
@@ -88,8 +90,8 @@ def simulate(
     solver: diffrax.AbstractSolver | None = None,
     ts: Any = None,
     args: Any = None,
-    rtol: float = 1e-8,
-    atol: float = 1e-8,
+    rtol: float | None = None,
+    atol: float | None = None,
     max_steps: int | None = None,
     progress: bool = False,
     *,
@@ -111,8 +113,11 @@ def simulate(
     - `y0`: `(q0, qdot0)` for a Lagrangian, `(q0, p0)` for a Hamiltonian.
     - `t1`: end time; default 10, or a scene's `default_t1`.
     - `dt`: fixed step; None for adaptive stepping with `rtol`, `atol` — except
-      for a scene run by its default (or another fixed-step) solver, which then
-      steps by the scene's `default_dt`.
+      for a scene run by its default (or another fixed-step) solver with no
+      tolerance given, which then steps by the scene's `default_dt`.
+    - `rtol`, `atol`: the tolerances of an adaptive run (default 1e-8 each) and of
+      implicit stage solves. Given with no `solver` and no `dt`, they ask for a
+      tolerance run, of a scene too.
     - `solver`: any diffrax solver or lagjax solver; None picks one by structure
       (`lagjax._integrate.solver_choice`) and records it in `stats["solver"]`.
     - `ts`: times to save at; default only the final state. `saveat` overrides.
@@ -146,6 +151,12 @@ def simulate(
       (`lagjax._integrate.checks.run_verdict`) is a failure too: `RESULTS.nonlinear_divergence`, and
       `stats["energy_drift"]` holds the measured ratio.
     """
+    # A tolerance given with no solver asks for a tolerance run, also of a scene
+    # (whose default run is otherwise its fixed step: rtol would only tune stage
+    # solves there, silently).
+    tolerance_run = solver is None and (rtol is not None or atol is not None)
+    rtol = DEFAULT_TOLERANCE if rtol is None else rtol
+    atol = DEFAULT_TOLERANCE if atol is None else atol
     if isinstance(solver, Taylor):  # Taylor series of the derived equations
         return run_taylor(system, y0, t0, t1, dt, solver, ts, args, rtol, atol,
                           max_steps, throw, saveat=saveat, adjoint=adjoint,
@@ -158,7 +169,7 @@ def simulate(
                                     dense=dense, event=event, progress=progress,
                                     stepsize_controller=stepsize_controller,
                                     progress_meter=progress_meter)  # fmt: skip
-    t1, dt = defaults(system, t0, t1, dt, solver, stepsize_controller)
+    t1, dt = defaults(system, t0, t1, dt, solver, stepsize_controller, tolerance_run)
     y0 = check_simulate_inputs(system, y0, t0, t1, dt, solver, ts, args, max_steps,
                                rtol, atol)  # fmt: skip
     if progress and progress_meter is not None:

@@ -87,12 +87,13 @@ def _checked_controller(solver, controller, dt):
     return controller
 
 
-def defaults(system, t0, t1, dt, solver, controller):
+def defaults(system, t0, t1, dt, solver, controller, tolerance_run=False):
     """`(t1, dt)` with what the caller left out filled in.
 
     t1 = 10 for a plain system. A scene supplies its own span, and its own step
-    unless the caller asked for adaptive stepping (an adaptive solver or a step-size
-    controller): `simulate(scene, scene.initial_state())` is then the scene's
+    unless the caller asked for adaptive stepping (an adaptive solver, a step-size
+    controller, or a tolerance with no solver: `tolerance_run`):
+    `simulate(scene, scene.initial_state())` is then the scene's
     default run — its default solver (`solver_choice.default_solver`) at its `default_dt` — as the
     command line does it.
     """
@@ -103,8 +104,10 @@ def defaults(system, t0, t1, dt, solver, controller):
         t1 = default_t1
     if default_dt is None:
         return t1, dt
-    adaptive = controller is not None or isinstance(
-        solver, diffrax.AbstractAdaptiveSolver
+    adaptive = (
+        tolerance_run
+        or controller is not None
+        or isinstance(solver, diffrax.AbstractAdaptiveSolver)
     )
     if dt is None and not adaptive:
         dt = default_dt
