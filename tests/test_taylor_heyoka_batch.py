@@ -1,6 +1,7 @@
 """`lj.Taylor(backend="heyoka")` under JAX transformations: `jax.vmap` over y0 and
-args reaches heyoka's batch mode in one call and equals the single runs; `jax.jit`
-runs it through a callback; `jax.grad` is refused by name."""
+args (and `lj.sweep`, `run_taylor_batch`) reaches heyoka's batch mode in one call
+and equals the single runs; `jax.jit` runs it through a callback; `jax.grad` is
+refused by name."""
 
 import diffrax
 import jax
@@ -97,3 +98,13 @@ def test_a_failed_member_is_told_by_its_result():
                                                  args=G))(y0s)  # fmt: skip
     assert not np.any(batch.stats["succeeded"])
     assert np.all(batch.result == diffrax.RESULTS.max_steps_reached)
+
+
+@pytest.mark.integration  # compiles lj.sweep's sharded program
+def test_sweep_is_one_batch_equal_to_single_runs(batches):
+    gs = jnp.linspace(1.0, 20.0, 5)
+    swept = lj.sweep(PENDULUM, (jnp.full(5, 1.0), jnp.zeros(5)), {"g": gs},
+                     t1=2.0, solver=HEYOKA)  # fmt: skip
+    assert batches == [gs.size]
+    singles = [final_angle(1.0, {"g": float(g)}) for g in gs]
+    np.testing.assert_allclose(swept.q[:, -1], singles, rtol=0, atol=1e-13)
