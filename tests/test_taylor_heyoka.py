@@ -43,13 +43,15 @@ def test_translation_matches_the_jax_vector_field():
     variables = [y for y, _ in system.equations]
     rhs = hy.cfunc([f for _, f in system.equations], variables)
     states = np.random.default_rng(0).normal(size=(20, 4))
+    jax_field = jax.jit(jax.vmap(vector_field, (None, 0, None)))  # one compilation
     for g in (9.81, 1.5):
-        jax_values = jax.vmap(vector_field, (None, 0, None))(0.0, states, {"g": g})
+        jax_values = jax_field(0.0, states, {"g": g})
         heyoka_values = rhs(np.ascontiguousarray(states.T), pars=np.full((1, 20), g)).T
         np.testing.assert_allclose(heyoka_values, jax_values, rtol=1e-13, atol=1e-13)
     assert system.num_pars == 1 and system.poisoned == ()
 
 
+@pytest.mark.integration  # compiles diffrax's Dopri8 for the reference
 def test_one_trajectory_agrees_with_dopri8():
     ts = np.linspace(0.0, 5.0, 6)
     run = heyoka_integrate(vector_field, Y0, 0.0, 5.0, ts=ts, args=ARGS, tol=1e-15)
