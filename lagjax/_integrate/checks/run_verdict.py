@@ -29,8 +29,9 @@ left out where p and q̇ are not paired, as for a rigid body's quaternion). The 
 term is the motion's own scale for a start at rest where E = 0 (free fall from
 y = 0, a pendulum let go at θ = π/2 with V = −cos θ): without it any round-off
 counted as divergence (drift 10²⁹³). Its factor keeps a blow-up caught: there
-|E − E0| ≈ ½ max |p·q̇|, a ratio of 5·10³ to the bound's 10³, while a stable run
-from such a start may err by up to 10 % of its kinetic energy. It
+|E − E0| ≈ E ≥ ½ max |p·q̇| (for a quadratic T), a ratio of at least 5·10³ to the
+bound's 10³, while a stable run from such a start may err by up to 10 % of its
+kinetic energy. It
 applies only when the system conserves energy: no generalized forces,
 dissipation or constraints (`AbstractSystem.conserves_energy_if_autonomous`), and
 $\partial E/\partial t = 0$ at every saved state (autodiff gives exactly zero for
