@@ -1,0 +1,258 @@
+r"""`simulate` with `lj.WisdomHolman`: a planetary system stepped in Jacobi coordinates.
+
+At the boundary the user's inertial $(q, p)$ become Jacobi coordinates
+(`lagjax.solvers.wisdom_holman.to_jacobi`), the corrector's inverse takes them to
+the mapping coordinates, $y \mapsto C^{-1}(y)$, and the loop runs the leapfrog with
+its half drifts merged:
+
+$$u_0 = D_{h/2}\,y_0,\qquad u_{n+1} = D_h K_h\,u_n,\qquad y_n = D_{-h/2}\,u_n$$
+
+(one Kepler drift and one kick per step; $y_n = \Phi_h^n y_0$ exactly as the
+synchronised step computes it). A saved state is $C(y_n)$ back in inertial
+coordinates. Saves lie on the step grid $t_0 + k\,h$: the corrector and the
+method's error belong to one step size, so a save between steps would need a
+different map; a time off the grid is refused with the step that would reach it.
+
+The loop is one `lax.scan` of the exact step count (`jit`, `vmap`, `jax.jvp`,
+`jax.grad`); it records $u_k$ at the save steps (one slot per distinct step, O(1)
+work per step) and synchronises them after the loop. A Kepler drift that does not
+converge, or a non-finite state, ends the run: the saves from that step on are NaN
+and `traj.result` says why (an error unless `throw=False`).
+
+References: Wisdom & Holman, AJ 102, 1528 (1991); Wisdom, Holman & Touma, Fields
+Inst. Commun. 10, 217 (1996); Rein & Tamayo, MNRAS 452, 376 (2015).
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import equinox as eqx
+import jax
+import jax.lax as lax
+import jax.numpy as jnp
+import numpy as np
+from jax.core import Tracer
+
+from lagjax._core.precision import cast_floats, working_dtype
+from lagjax._integrate.checks.inputs import check_simulate_inputs
+from lagjax.solvers.wisdom_holman import (
+    RESULTS,
+    GravitatingBodies,
+    KeplerInteractionTerm,
+    WisdomHolman,
+    to_inertial,
+    to_jacobi,
+)
+from lagjax.trajectory import Trajectory
+
+_GRID_TOLERANCE = 1e-9  # of a step: a save time this close to t0 + k·dt is on it
+
+
+def run_wisdom_holman(
+    system: Any, y0: Any, t0: Any, t1: Any, dt: Any, solver: WisdomHolman,
+    ts: Any, args: Any, max_steps: int | None, throw: bool, **options: Any,
+) -> Trajectory:  # fmt: skip
+    """`simulate` for a `WisdomHolman` solver: the checks, the run, the verdict."""
+    given = [name for name, value in options.items() if value not in (None, False)]
+    if given:
+        raise ValueError(
+            f"{solver.name} does not support {', '.join(given)}: it saves the states "
+            "at the times ts=... on its step grid t0 + k·dt"
+        )
+    if t1 is None:
+        t1 = system.default_span()[0]
+    t0, t1, dt = _static_times(t0, t1, dt, solver)
+    y0 = check_simulate_inputs(system, y0, t0, t1, dt, None, ts, args, max_steps)
+    system, args = system.resolve(args)
+    if not isinstance(args, GravitatingBodies):
+        raise TypeError(
+            f"{solver.name} integrates gravitating bodies: pass a "
+            "lagjax.scenes.PlanetarySystem (or args with masses and "
+            f"gravitational_constant); got args of type {type(args).__name__}"
+        )
+    dtype = working_dtype(y0)
+    y0, args = cast_floats(y0, dtype), cast_floats(args, dtype)
+    _check_bodies(args, y0, solver)
+    save_ts = np.reshape(np.asarray(t1 if ts is None else ts, dtype=float), (-1,))
+    save_steps = _save_steps(save_ts, t0, dt, solver)
+    steps = int(save_steps.max())
+    if max_steps is not None and steps > max_steps:
+        raise ValueError(
+            f"{solver.name}: the last save time needs {steps} steps of dt = {dt:g}, "
+            f"more than max_steps = {max_steps}; raise max_steps or pass a larger dt"
+        )
+    distinct, slot_of_save = np.unique(save_steps, return_inverse=True)
+    trajectory = _compiled_run(
+        system, args, y0, solver, jnp.asarray(dt, dtype), steps,
+        tuple(int(k) for k in distinct), tuple(int(i) for i in slot_of_save),
+        jnp.asarray(save_ts, dtype),
+    )  # fmt: skip
+    if throw:
+        trajectory = eqx.error_if(
+            trajectory,
+            trajectory.result != RESULTS.successful,
+            f"{solver.name}: a Kepler drift did not converge or the state became "
+            "non-finite (two bodies met, or a body fell into the star): see "
+            "traj.result with throw=False",
+        )
+    return trajectory
+
+
+def _static_times(t0: Any, t1: Any, dt: Any, solver: WisdomHolman):
+    """t0, t1, dt as Python floats: the step count fixes the loop's length."""
+    if dt is None:
+        raise ValueError(
+            f"{solver.name} takes fixed steps: pass dt (a twentieth of the innermost "
+            "orbit's period or less; 10 days for the outer solar system)"
+        )
+    if any(isinstance(value, Tracer) for value in (t0, t1, dt)):
+        raise TypeError(
+            f"{solver.name} needs t0, t1 and dt as numbers, not traced values: the "
+            "number of steps is the length of its compiled loop"
+        )
+    t0, t1, dt = float(t0), float(t1), float(dt)
+    if not dt > 0:
+        raise ValueError(f"{solver.name}: the step dt must be positive; got {dt}")
+    if not t1 > t0:
+        raise ValueError(
+            f"{solver.name} integrates forward: t1 = {t1} must exceed t0 = {t0} "
+            "(for the past, reverse the momenta)"
+        )
+    return t0, t1, dt
+
+
+def _check_bodies(bodies: Any, y0: Any, solver: WisdomHolman) -> None:
+    """A positive central mass and G, one row of y0 per mass; traced values are
+    checked when the compiled run starts (`_compiled_run`)."""
+    masses = bodies.masses
+    if jnp.ndim(masses) != 1 or jnp.shape(masses)[0] < 2:
+        raise ValueError(
+            f"{solver.name} needs masses of shape (N,) with N ≥ 2 bodies (the star "
+            f"first); got shape {jnp.shape(masses)}"
+        )
+    for part, name in zip(y0, ("positions q0", "momenta p0")):
+        if jnp.shape(part) != (jnp.shape(masses)[0], 3):
+            raise ValueError(
+                f"{solver.name}: {name} must have shape (N, 3) = "
+                f"({jnp.shape(masses)[0]}, 3), one row per mass; got {jnp.shape(part)}"
+            )
+    if isinstance(masses, Tracer):
+        return
+    central = float(masses[0])
+    if not central > 0 or not bool(jnp.all(masses > 0)):
+        raise ValueError(
+            f"{solver.name}: the central mass masses[0] = {central:g} and every "
+            f"other mass must be positive; got masses = {np.asarray(masses)}"
+        )
+    gravity = bodies.gravitational_constant
+    if not isinstance(gravity, Tracer) and not float(gravity) > 0:
+        raise ValueError(
+            f"{solver.name}: the gravitational constant must be positive; got "
+            f"{float(gravity)}"
+        )
+
+
+def _save_steps(save_ts: np.ndarray, t0: float, dt: float, solver) -> np.ndarray:
+    """The step index k of each save time t0 + k·dt; off-grid times refused."""
+    positions = (save_ts - t0) / dt
+    steps = np.round(positions)
+    off = np.abs(positions - steps) > _GRID_TOLERANCE * np.maximum(1, np.abs(steps))
+    if np.any(off) or np.any(steps < 0) or not np.all(np.isfinite(save_ts)):
+        bad = float(save_ts[np.argmax(off | (steps < 0) | ~np.isfinite(save_ts))])
+        raise ValueError(
+            f"{solver.name} saves on its step grid t0 + k·dt (t0 = {t0:g}, dt = "
+            f"{dt:g}); {bad:g} is not on it. Pass save times on the grid, or a dt "
+            "that divides the spacing of ts (the corrector and the error of the "
+            "map belong to one step size)"
+        )
+    return steps.astype(np.int64)
+
+
+class _Carry(NamedTuple):
+    u: Any  # the state half a drift ahead, u = D_{h/2} y
+    next_slot: jax.Array  # the first distinct save step not yet reached
+    slots: Any  # u at each distinct save step, and a spare that takes other writes
+    failed_at: jax.Array  # the first step whose drift failed (steps + 1: none)
+
+
+@eqx.filter_jit
+def _compiled_run(
+    system, bodies, y0, solver, h, steps, distinct, slot_of_save, save_ts
+) -> Trajectory:
+    """The boundary conversions, the loop and the `Trajectory` (module docstring)."""
+    masses = bodies.masses
+    term = KeplerInteractionTerm(masses, bodies.gravitational_constant)
+    valid = (masses[0] > 0) & jnp.all(masses > 0) & (bodies.gravitational_constant > 0)
+    h = eqx.error_if(
+        h, ~valid, "WisdomHolman: the masses and G must be positive (masses[0] first)"
+    )
+    u, ok_start = solver.enter(term, to_jacobi(masses, *y0), h)
+    targets = jnp.asarray((*distinct, -1), jnp.int32)
+    spare = len(distinct)
+    slots = jax.tree_util.tree_map(
+        lambda x: jnp.zeros((spare + 1, *x.shape), x.dtype), u
+    )
+
+    def record(carry: _Carry, step: jax.Array) -> _Carry:
+        hit = targets[carry.next_slot] == step
+        slot = jnp.where(hit, carry.next_slot, spare)
+        slots = jax.tree_util.tree_map(
+            lambda buffer, x: buffer.at[slot].set(x), carry.slots, carry.u
+        )
+        return carry._replace(next_slot=carry.next_slot + hit, slots=slots)
+
+    def advance(carry: _Carry, step: jax.Array) -> tuple[_Carry, None]:
+        u, converged = term.drift(term.kick(carry.u, h), h)
+        healthy = converged & _finite(u)
+        failed_at = jnp.where(
+            healthy | (carry.failed_at <= steps), carry.failed_at, step
+        )
+        carry = carry._replace(u=u, failed_at=failed_at)
+        return record(carry, step), None
+
+    never = jnp.asarray(steps + 1, jnp.int32)
+    failed_at = jnp.where(ok_start & _finite(u), never, 0)
+    start = _Carry(u, jnp.zeros((), jnp.int32), slots, failed_at)
+    carry = record(start, jnp.zeros((), jnp.int32))
+    carry, _ = lax.scan(advance, carry, jnp.arange(1, steps + 1, dtype=jnp.int32))
+
+    def synchronised(u_k):
+        y_k, converged = solver.leave(term, u_k, h)
+        return to_inertial(masses, *y_k), converged
+
+    per_slot = jax.tree_util.tree_map(lambda buffer: buffer[:spare], carry.slots)
+    states, ok_saves = jax.vmap(synchronised)(per_slot)
+    order = np.asarray(slot_of_save)
+    reached = jnp.asarray(distinct)[order] < carry.failed_at
+    good = reached & ok_saves[order]
+    q, p = jax.tree_util.tree_map(
+        lambda x: jnp.where(good.reshape(-1, 1, 1), x[order], jnp.nan), states
+    )
+    result = RESULTS.where(
+        (carry.failed_at > steps) & jnp.all(ok_saves),
+        RESULTS.successful,  # pyright: ignore[reportArgumentType]
+        RESULTS.kepler_not_converged,
+    )
+    stats = dict(
+        num_steps=jnp.asarray(steps),
+        num_accepted_steps=jnp.asarray(steps),
+        num_rejected_steps=jnp.asarray(0),
+        coordinates="Jacobi",
+        corrector=0 if solver.corrector is None else solver.corrector,
+        failed_at_step=jnp.where(carry.failed_at > steps, -1, carry.failed_at),
+    )
+    return Trajectory(
+        ts=save_ts,
+        ys=(q, p),
+        system=system,
+        args=bodies,
+        run_stats=stats,
+        result=result,
+        solver_name=solver.name,
+    )
+
+
+def _finite(tree: Any) -> jax.Array:
+    leaves = jax.tree_util.tree_leaves(tree)
+    return jnp.all(jnp.asarray([jnp.all(jnp.isfinite(x)) for x in leaves]))
