@@ -31,18 +31,9 @@ import jax.numpy as jnp
 import numpy as np
 
 import lagjax as lj
+from benchmarks.taylor import LAGRANGIAN, vector_field  # the same double pendulum
 from lagjax.taylor.batch import taylor_integrate_batch
 
-G = 9.81
-
-
-def _lagrangian(q, qdot, t, args):
-    (a, b), (wa, wb) = q, qdot
-    kinetic = wa**2 + 0.5 * wb**2 + wa * wb * jnp.cos(a - b)
-    return kinetic + 2 * G * jnp.cos(a) + G * jnp.cos(b)
-
-
-LAGRANGIAN = lj.Lagrangian(_lagrangian)
 T1 = 10.0
 
 
@@ -50,11 +41,6 @@ def initial_states(members: int) -> tuple[jax.Array, jax.Array]:
     theta1 = jnp.linspace(0.1, 1.0, members)
     q0 = jnp.stack([theta1, jnp.full_like(theta1, 0.3)], axis=-1)
     return q0, jnp.zeros_like(q0)
-
-
-def vector_field(t, y, args):
-    q, qdot = y[:2], y[2:]
-    return jnp.concatenate([qdot, LAGRANGIAN.acceleration(q, qdot, t, args)])
 
 
 def route(name: str):
