@@ -60,3 +60,12 @@ def counted_compilations():
         yield compiled
     finally:
         jax.monitoring.unregister_event_duration_listener(listener)
+
+
+def one_error_line(capsys) -> str:
+    """The command's one-line error (no traceback) from pytest's captured stderr."""
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    return lines[0]

@@ -20,15 +20,7 @@ from lagjax.cli import command as cli
 from lagjax.cli import main
 from lagjax.cli import run as cli_run
 from lagjax.cli.plot import _check_series
-
-
-def one_error_line(capsys) -> str:
-    err = capsys.readouterr().err
-    assert "Traceback" not in err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1, err
-    return lines[0]
-
+from tests.helpers import one_error_line
 
 PENDULUM = ["run", "simple-pendulum"]
 BAD_ARGUMENTS = [

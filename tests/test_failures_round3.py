@@ -24,6 +24,7 @@ from lagjax.cli import main
 from lagjax.cli import run as cli_run
 from lagjax.mechanics.captured_globals import CapturedNumberWarning, captured_numbers
 from lagjax.scenes.pendulums import DoublePendulum, SimplePendulum
+from tests.helpers import one_error_line
 
 W = 1.5  # the oscillators' angular frequency (UPPER_CASE: a constant, not warned)
 
@@ -343,14 +344,6 @@ def test_numbers_passed_as_args_follow_their_new_value():
 
 
 # -- the command ---------------------------------------------------------------------
-
-
-def one_error_line(capsys) -> str:
-    err = capsys.readouterr().err
-    assert "Traceback" not in err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1, err
-    return lines[0]
 
 
 PENDULUM = ["run", "simple-pendulum"]
