@@ -1,5 +1,6 @@
 """The batch-native Taylor integrator (`lagjax.taylor.batch`): the scalar graph's
-coefficients against `jax.experimental.jet`, each member's result against its own
+coefficients on the tape against nested `jax.jvp` and the vector graph (itself
+checked against `jax.experimental.jet`), each member's result against its own
 one-trajectory run, per-member steps and saves, batched parameters, refusals."""
 
 import math
@@ -8,7 +9,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from jax.experimental import jet
 
 import lagjax as lj
 from lagjax.taylor import RESULTS, taylor_integrate
@@ -35,31 +35,72 @@ def pendulum(t, y, g):
     return jnp.stack([y[1], -g * jnp.sin(y[0])])
 
 
-def _jet_coefficients(f, y0, order):
-    derivatives = [f(y0)]
-    for _ in range(2, order + 1):
-        _, series = jet.jet(f, (y0,), (derivatives,))
-        derivatives.append(series[-1])
-    return jnp.stack(
-        [y0] + [d / math.factorial(k) for k, d in enumerate(derivatives, 1)]
-    )
+def _lie_coefficients(f, y0, order):
+    """yₖ = (L_f)ᵏ y / k! at y0 by nested jax.jvp (autonomous f)."""
+    derivative = lambda y: y
+    coefficients = [y0]
+    for k in range(1, order + 1):
+        derivative = (lambda g: lambda y: jax.jvp(g, (y,), (f(y),))[1])(derivative)
+        coefficients.append(derivative(y0) / math.factorial(k))
+    return jnp.stack(coefficients)
 
 
-def test_scalar_graph_coefficients_of_a_batch_match_jet():
+def test_scalar_graph_coefficients_of_a_batch_match_the_vector_graph():
     y0s = jnp.array([[0.5, 0.3, 0.1, -0.2], [1.0, -0.4, 0.0, 0.3], [0.1, 0.2, 0, 0]])
     graph, leaves = lower_vector_field(double_pendulum, 0.0, y0s[0], None, scalar=True)
     assert graph.scalar
     assert all(graph.avals[i].shape == () for op in graph.ops for i in op.outs)
     ours = jax.jit(
         lambda y: graph_coefficients(
-            graph, jnp.zeros(3), y.T, leaves, 6, unroll=False, batched_leaves=()
+            graph, jnp.zeros(3), y.T, leaves, 8, unroll=False, batched_leaves=()
         )
     )(y0s)
-    f = lambda y: double_pendulum(0.0, y, None)
+    vector_graph, _ = lower_vector_field(double_pendulum, 0.0, y0s[0], None)
+    # the vector graph's sweep is checked against jet and nested jvp in test_taylor
+    by_vector = jax.jit(
+        jax.vmap(
+            lambda y0: graph_coefficients(
+                vector_graph, 0.0, y0, leaves, 8, unroll=False
+            )
+        )
+    )(y0s)
+    scale = jnp.max(jnp.abs(by_vector), axis=2, keepdims=True)
+    error = jnp.abs(jnp.moveaxis(ours, -1, 0) - by_vector) / scale
+    assert jnp.max(error) < 1e-13
+
+
+def _every_rule(t, y, args):
+    a, b = y[0], y[1]
+    return jnp.stack(
+        [
+            jnp.exp(0.3 * a) * jnp.log(2.0 + b) + jnp.sqrt(1.5 + a) / (2.0 + b**2)
+            + jnp.tan(0.2 * a) - jnp.tanh(b) + (1.2 + a) ** 1.7,
+            jnp.abs(a - 3.0) + jnp.maximum(b, -5.0) + jnp.expm1(0.1 * b)
+            + jnp.log1p(0.5 + 0.1 * a) + a**-2 + jnp.cbrt(4.0 + b) + t * a
+            + jax.lax.rsqrt(2.0 + b),
+        ]
+    )  # fmt: skip
+
+
+@pytest.mark.integration  # nested jvp to order 5: a long compilation
+def test_every_rule_on_the_tape_matches_nested_jvp():
+    y0s = jnp.array([[0.7, -0.4], [0.2, 0.3]])
+    graph, leaves = lower_vector_field(_every_rule, 0.0, y0s[0], None, scalar=True)
+    census = set(graph.census())
+    assert {"Exp", "Log", "Power", "Sqrt", "TanLike", "Quotient", "Branch"} <= census
+    ours = jax.jit(
+        lambda y: graph_coefficients(
+            graph, jnp.zeros(2), y.T, leaves, 5, unroll=False, batched_leaves=()
+        )
+    )(y0s)
+
+    def extended(z):  # time as a third state: the autonomous reference applies
+        return jnp.concatenate([_every_rule(z[2], z[:2], None), jnp.ones(1)])
+
     for member, y0 in enumerate(y0s):
-        by_jet = _jet_coefficients(f, y0, 6)
-        scale = jnp.max(jnp.abs(by_jet), axis=1, keepdims=True)
-        assert jnp.max(jnp.abs(ours[..., member] - by_jet) / scale) < 1e-13
+        z0 = jnp.concatenate([y0, jnp.zeros(1)])
+        reference = _lie_coefficients(extended, z0, 5)[:, :2]
+        np.testing.assert_allclose(ours[..., member], reference, rtol=1e-12, atol=1e-13)
 
 
 @pytest.fixture(scope="module")
@@ -70,7 +111,7 @@ def pendulum_batch():
     run = jax.jit(
         lambda y0s, gs: taylor_integrate_batch(
             pendulum, y0s, 0.0, 6.0, ts=ts, args=gs, args_axis=0, rtol=1e-13,
-            atol=1e-13,
+            atol=1e-13, tile=2,  # three tiles, the last padded
         )
     )  # fmt: skip
     return y0s, gs, ts, run(y0s, gs)

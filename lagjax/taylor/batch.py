@@ -11,12 +11,18 @@ writes the batch loop directly instead, as heyoka's batch mode does:
 - the batch on the last (minor) axis of every value: the state is (n, B), a
   series (p + 1, *shape, B), so each elementary operation of every recurrence is
   one vector operation over the members (SIMD on a CPU, a wide kernel on a GPU);
-- one `while_loop` over steps for the whole batch until every member reached
-  t1; a finished member takes zero steps (τᵦ = 0) and keeps its state.
+- one `while_loop` over steps per tile of `tile` members (32 by default) until
+  every member of the tile reached t1; a finished member takes zero steps
+  (τᵦ = 0) and keeps its state. Tiles run in turn (`lax.map`): a member waits
+  only for its tile's slowest, and a tile's tape stays in cache (on the
+  double pendulum ×1024, tiles of 16, 32, 64, 128: 2.5, 2.1, 2.8, 3.5× heyoka's
+  batch mode, loaded machine);
+- the coefficients by the scalar graph on a tape (`tape`): per order, the inner
+  Cauchy sums of every operation, then O(1) per operation.
 
 The cost per step is that of one trajectory with every scalar replaced by a
-vector of B, so per member it falls with B until the vector unit (or the
-memory) is full. It is a forward computation: for gradients use `jax.vmap` of
+vector of the tile, so per member it falls with the tile until the vector unit
+(or the cache) is full. It is a forward computation: for gradients use `jax.vmap` of
 `taylor_integrate`, which reverse mode can enter.
 
 References: Biscani & Izzo, "Revisiting high-order Taylor methods for
@@ -130,6 +136,7 @@ def taylor_integrate_batch(
     max_steps: int = 1_000_000,
     unroll: bool = False,
     scalar: bool = True,
+    tile: int = 32,
 ) -> TaylorSolution:
     """Integrate y' = vector_field(t, y, args) for every row of `y0s` (shape
     (B, n)) from t0 to t1 (scalars, or one per member, shape (B,)), by Taylor's
@@ -169,63 +176,98 @@ def taylor_integrate_batch(
         jax.tree_util.tree_unflatten(jax.tree_util.tree_structure(args), leaf_flags),
     )
     graph, _ = lower_vector_field(vector_field, t0[0], y0s[0], one_args, scalar=scalar)
-    direction = jnp.where(t1 >= t0, 1.0, -1.0).astype(dtype)
     saver = _masked_saver if ts.shape[0] <= SMALL_SAVES else _loop_saver
-    save = saver(ts, direction)
 
-    def body(c: _Carry) -> _Carry:
-        coeffs = graph_coefficients(
-            graph, c.t, c.y, leaves, p, unroll=unroll, batched_leaves=leaf_flags
+    def run_tile(t0, t1, y0, leaves):
+        direction = jnp.where(t1 >= t0, 1.0, -1.0).astype(dtype)
+        save = saver(ts, direction)
+
+        def body(c: _Carry) -> _Carry:
+            coeffs = graph_coefficients(
+                graph, c.t, c.y, leaves, p, unroll=unroll, batched_leaves=leaf_flags
+            )
+            h = step_size(coeffs, rtol, atol)
+            active = (c.t != t1) & (c.result == RESULTS.successful)
+            remaining = direction * ((t1 - c.t) - c.t_low)
+            last = h >= remaining
+            tau = jnp.where(active, direction * jnp.where(last, remaining, h), 0.0)
+            t_sum, t_err = two_sum(c.t, tau)
+            t_high, t_low = two_sum(t_sum, c.t_low + t_err)
+            t_new = jnp.where(last, t1, t_high)
+            y_new = horner(coeffs, tau)
+            finite = jnp.all(jnp.isfinite(y_new), axis=0)
+            ok = active & finite
+            ys, index = save(coeffs, c.t, c.t_low, t_new, c.ys, c.index, ok)
+            return _Carry(
+                t=jnp.where(ok, t_new, c.t),
+                t_low=jnp.where(ok, jnp.where(last, 0.0, t_low), c.t_low),
+                y=jnp.where(ok, y_new, c.y),
+                ys=ys,
+                index=index,
+                num_steps=c.num_steps + ok,
+                result=_where(active & ~finite, RESULTS.non_finite, c.result),
+                count=c.count + 1,
+            )
+
+        def cond(c: _Carry) -> jax.Array:
+            running = (c.t != t1) & (c.result == RESULTS.successful)
+            return jnp.any(running) & (c.count < max_steps)
+
+        at_start = direction * (ts[:, None] - t0) <= 0  # (S, B)
+        width = t0.shape[0]
+        init = _Carry(
+            t=t0,
+            t_low=jnp.zeros_like(t0),
+            y=y0,
+            ys=jnp.where(at_start[:, None, :], y0, jnp.nan),
+            index=jnp.sum(at_start, axis=0),
+            num_steps=jnp.zeros(width, int),
+            result=_where(
+                jnp.ones(width, bool), RESULTS.successful, RESULTS.successful
+            ),
+            count=jnp.array(0),
         )
-        h = step_size(coeffs, rtol, atol)
-        active = (c.t != t1) & (c.result == RESULTS.successful)
-        remaining = direction * ((t1 - c.t) - c.t_low)
-        last = h >= remaining
-        tau = jnp.where(active, direction * jnp.where(last, remaining, h), 0.0)
-        t_sum, t_err = two_sum(c.t, tau)
-        t_high, t_low = two_sum(t_sum, c.t_low + t_err)
-        t_new = jnp.where(last, t1, t_high)
-        y_new = horner(coeffs, tau)
-        finite = jnp.all(jnp.isfinite(y_new), axis=0)
-        ok = active & finite
-        ys, index = save(coeffs, c.t, c.t_low, t_new, c.ys, c.index, ok)
-        return _Carry(
-            t=jnp.where(ok, t_new, c.t),
-            t_low=jnp.where(ok, jnp.where(last, 0.0, t_low), c.t_low),
-            y=jnp.where(ok, y_new, c.y),
-            ys=ys,
-            index=index,
-            num_steps=c.num_steps + ok,
-            result=_where(active & ~finite, RESULTS.non_finite, c.result),
-            count=c.count + 1,
+        final = jax.lax.while_loop(cond, body, init)
+        result = _where(
+            (final.t != t1) & (final.result == RESULTS.successful),
+            RESULTS.max_steps_reached,
+            final.result,
         )
+        return final.ys, final.num_steps, result
 
-    def cond(c: _Carry) -> jax.Array:
-        running = (c.t != t1) & (c.result == RESULTS.successful)
-        return jnp.any(running) & (c.count < max_steps)
-
-    y0 = y0s.T
-    at_start = direction * (ts[:, None] - t0) <= 0  # (S, B)
-    init = _Carry(
-        t=t0,
-        t_low=jnp.zeros_like(t0),
-        y=y0,
-        ys=jnp.where(at_start[:, None, :], y0, jnp.nan),
-        index=jnp.sum(at_start, axis=0),
-        num_steps=jnp.zeros(members, int),
-        result=_where(jnp.ones(members, bool), RESULTS.successful, RESULTS.successful),
-        count=jnp.array(0),
-    )
-    final = jax.lax.while_loop(cond, body, init)
-    result = _where(
-        (final.t != t1) & (final.result == RESULTS.successful),
-        RESULTS.max_steps_reached,
-        final.result,
-    )
+    ys, num_steps, result = _tiled(run_tile, (t0, t1, y0s.T, leaves), leaf_flags, tile)
     return TaylorSolution(
-        ts=ts,
-        ys=jnp.moveaxis(final.ys, -1, 0),
-        num_steps=final.num_steps,
-        result=result,
-        order=p,
+        ts=ts, ys=jnp.moveaxis(ys, -1, 0), num_steps=num_steps, result=result, order=p
     )
+
+
+def _tiled(run: Callable, inputs: tuple, leaf_flags: tuple, tile: int) -> Any:
+    """`run(t0, t1, y0, leaves)` on tiles of `tile` members in turn (the batch
+    axis last everywhere): a member waits only for its tile's slowest, and a
+    tile's values stay in cache. The batch is padded with copies of its last
+    member to a whole number of tiles."""
+    t0, t1, y0, leaves = inputs
+    members = t0.shape[0]
+    if members <= tile:
+        return run(t0, t1, y0, leaves)
+    count = -(-members // tile)
+    pad = count * tile - members
+
+    def split(x):  # (..., B) -> (tiles, ..., tile)
+        x = jnp.concatenate([x, jnp.repeat(x[..., -1:], pad, axis=-1)], axis=-1)
+        return jnp.moveaxis(x.reshape((*x.shape[:-1], count, tile)), -2, 0)
+
+    def merge(x):  # (tiles, ..., tile) -> (..., B)
+        x = jnp.moveaxis(x, 0, -2)
+        return x.reshape((*x.shape[:-2], count * tile))[..., :members]
+
+    batched = [split(x) for x, b in zip(leaves, leaf_flags) if b]
+
+    def one(tile_inputs):
+        t0, t1, y0, picked = tile_inputs
+        it = iter(picked)
+        tile_leaves = [next(it) if b else x for x, b in zip(leaves, leaf_flags)]
+        return run(t0, t1, y0, tile_leaves)
+
+    outputs = jax.lax.map(one, (split(t0), split(t1), split(y0), batched))
+    return jax.tree_util.tree_map(merge, outputs)
