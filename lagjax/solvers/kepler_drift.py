@@ -199,8 +199,8 @@ def _universal_anomaly(orbit: _Orbit, angular2: jax.Array):
         inside = (new >= low) & (new <= high)
         new = jnp.where(inside, new, 0.5 * (low + high))
         stop = jnp.where(inside, cubic_stop, 8 * eps) * jnp.abs(s)
-        converged = (jnp.abs(new - s) <= stop) | (residual == 0)
-        return new, low, high, iteration + 1, converged
+        settled = (jnp.abs(new - s) <= stop) | (residual == 0)
+        return new, low, high, iteration + 1, settled & jnp.isfinite(residual)
 
     def going(carry):
         *_, iteration, converged = carry
