@@ -14,6 +14,8 @@ import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
+from jax.core import Tracer
 
 from lagjax._core.system import AbstractSystem
 
@@ -46,13 +48,15 @@ class Trajectory(eqx.Module):
         Needs `simulate(..., dense=True)` (or `saveat=diffrax.SaveAt(dense=True)`);
         between steps of a fixed-step solver it is the Hermite extension of
         `lagjax.solvers.hermite`. An array `t` gives arrays with a leading time axis.
+        A time that is not finite (NaN, inf) or lies outside the span is refused: a
+        concrete one here, a traced one by a run-time error (`eqx.error_if`).
         """
         if self.dense_output is None:
             raise ValueError(
                 "this trajectory kept no dense output: run simulate(..., dense=True) "
                 "to evaluate it between saved times"
             )
-        return self.dense_output.evaluate(t)
+        return self.dense_output.evaluate(_finite_times(t))
 
     @property
     def stats(self) -> dict[str, Any]:
@@ -93,3 +97,22 @@ class Trajectory(eqx.Module):
     def energy(self) -> jax.Array:
         """H(q, p, t) or the Jacobi integral h(q, q̇, t) at every saved time."""
         return self._along(self.system.state_energy)
+
+
+def _finite_times(t: Any) -> Any:
+    """`t` if every entry is finite; NaN compares false with both ends of the span,
+    so the span check alone would let it through as a NaN state."""
+    remedy = "evaluate at finite times inside the run's span [t0, t1]"
+    if isinstance(t, Tracer):
+        return eqx.error_if(
+            t, ~jnp.isfinite(t), f"Trajectory.evaluate: t is NaN or inf; {remedy}"
+        )
+    values = np.asarray(t)
+    bad = np.flatnonzero(~np.isfinite(values))
+    if bad.size:
+        where = "t" if values.ndim == 0 else f"t[{bad[0]}]"
+        shown = values.reshape(-1)[bad[0]]
+        raise ValueError(
+            f"Trajectory.evaluate: {where} = {shown} is not a finite time; {remedy}"
+        )
+    return t

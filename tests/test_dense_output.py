@@ -160,7 +160,7 @@ def test_saveat_dense_and_off_grid_ts_use_the_extension():
     exact = reference("pendulum")
     ts = jnp.array([0.123, 1.0, 1.777])
     run = lj.simulate(
-        PENDULUM, START, t1=SPAN, dt=0.05, solver=lj.Yoshida6(), ts=ts,
+        PENDULUM, START, t1=SPAN, dt=0.05, solver=lj.Yoshida6(),
         saveat=diffrax.SaveAt(ts=ts, dense=True),
     )  # fmt: skip
     q_exact, _ = exact.evaluate(ts)

@@ -52,9 +52,10 @@ from lagjax._core.precision import (
 from lagjax._core.static_values import Constant
 from lagjax._core.system import AbstractSystem
 from lagjax._integrate.checks.forward_mode import forward_mode_explained
-from lagjax._integrate.checks.inputs import check_simulate_inputs
+from lagjax._integrate.checks.inputs import check_save_choice, check_simulate_inputs
 from lagjax._integrate.checks.late_failure import raise_if_failed
 from lagjax._integrate.checks.run_verdict import judge_run
+from lagjax._integrate.checks.traced_save_times import checked_traced_save_times
 from lagjax._integrate.dense_output import DenseSolution, UserState, event_in_user_state
 from lagjax._integrate.diffeqsolve_run import integrate_with_diffeqsolve
 from lagjax._integrate.flat_state import flattened
@@ -120,7 +121,8 @@ def simulate(
       tolerance run, of a scene too.
     - `solver`: any diffrax solver or lagjax solver; None picks one by structure
       (`lagjax._integrate.solver_choice`) and records it in `stats["solver"]`.
-    - `ts`: times to save at; default only the final state. `saveat` overrides.
+    - `ts`: times to save at; default only the final state. Give `ts` or `saveat`,
+      not both (refused).
     - `max_steps`: default: the exact count for fixed steps, 10⁵ adaptive.
     - `progress`: show diffrax's text progress meter.
     - `adjoint`: diffrax adjoint; pass `diffrax.ForwardMode()` to use `jax.jvp` /
@@ -155,6 +157,7 @@ def simulate(
     # (whose default run is otherwise its fixed step: rtol would only tune stage
     # solves there, silently).
     tolerance_run = solver is None and (rtol is not None or atol is not None)
+    check_save_choice(ts, saveat)  # before the Taylor and time-transformed routes
     rtol = DEFAULT_TOLERANCE if rtol is None else rtol
     atol = DEFAULT_TOLERANCE if atol is None else atol
     if isinstance(solver, Taylor):  # Taylor series of the derived equations
@@ -196,7 +199,7 @@ def simulate(
     # A concrete adaptive run is diagnosed after its compiled call, in one plain
     # error that keeps what was computed (`checks.late_failure`).
     late = throw and dt is None and not _traced(system, y0, args, ts)
-    plan = RunPlan(t0, t1, dt, _save_times(ts, dtype), rtol, atol, max_steps,
+    plan = RunPlan(t0, t1, dt, _save_times(ts, dtype, t0, t1), rtol, atol, max_steps,
                    progress, saveat, adjoint, throw and not late, dtype, dense, event,
                    stepsize_controller, progress_meter)  # fmt: skip
     mode = plan.saving_mode()
@@ -272,9 +275,12 @@ def _compiled_run(system, y0, args, solver, run: RunPlan, mode: Saving) -> Traje
     )
 
 
-def _save_times(ts: Any, dtype: Any) -> Any:
+def _save_times(ts: Any, dtype: Any, t0: Any, t1: Any) -> Any:
     """`ts` in the run's dtype: a NumPy array when concrete (no device work before
-    the compiled call), a tracer as it is."""
-    if ts is None or isinstance(ts, Tracer):
+    the compiled call, its values checked before), a tracer with its values checked
+    at run time (`checks.traced_save_times`)."""
+    if ts is None:
         return ts
+    if isinstance(ts, Tracer):
+        return checked_traced_save_times(ts, t0, t1)
     return np.asarray(ts, dtype=dtype)

@@ -231,6 +231,7 @@ def _interval_actions_single(system, nodes, ts, values, slopes, args):
 
 def _interval_actions(system: System, trajectory: Trajectory, nodes: int) -> jax.Array:
     """Action over each interval between saved times; leading batch axes kept."""
+    _refuse_non_trajectory(trajectory)
     system, args = resolve_system(system, trajectory.args)
     if jnp.shape(trajectory.ts)[-1] < 2:
         raise ValueError(
@@ -252,6 +253,19 @@ def _interval_actions(system: System, trajectory: Trajectory, nodes: int) -> jax
     for _ in range(jnp.ndim(trajectory.ts) - 1):
         mapped = jax.vmap(mapped)
     return mapped(trajectory.ts, values, slopes, args)
+
+
+def _refuse_non_trajectory(trajectory: Any) -> None:
+    """The action reads the saved times, states and args of a run: a bare tuple of
+    arrays carries neither the times nor the convention (q̇ or p) of its states."""
+    if isinstance(trajectory, Trajectory):
+        return
+    raise TypeError(
+        "the action takes the Trajectory that lj.simulate returns, with its states "
+        "saved along the path (e.g. simulate(..., ts=jnp.linspace(t0, t1, 101))); "
+        f"got {type(trajectory).__name__}. For a path given as a function q(t), "
+        "use lj.action_of_path(system, path, t0, t1)"
+    )
 
 
 @eqx.filter_jit

@@ -10,6 +10,12 @@ part of the program, by identity). A module-level number the function reads —
 
 — is read while tracing and becomes a constant of that program. Rebinding it later
 (`g = 1.62`) changes nothing: the Earth answer comes back for the Moon, silently.
+A system built after the rebinding is another program: `captured_identity` keeps
+the captured numbers' values at construction as a static field of the system
+(`Lagrangian.captured`, `Hamiltonian.captured`), so systems built before and after
+compare unequal and `eqx.filter_jit` compiles anew. Reusing the same system object
+still runs its first compilation, with the old value.
+
 The sound way to vary a number is an argument, `L(q, qdot, t, args)` with
 `simulate(..., args=...)`: arguments are traced, and a new value reuses the
 compilation.
@@ -31,6 +37,7 @@ from __future__ import annotations
 
 import dis
 import functools
+import hashlib
 import inspect
 import math
 import sys
@@ -58,26 +65,51 @@ class CapturedNumberWarning(UserWarning):
     """A user's L or H reads a module-level number that compiling will freeze."""
 
 
-def warn_captured_numbers(function: Callable | None, what: str) -> None:
+def warn_captured_numbers(function: Callable | None, what: str) -> dict[str, Any]:
     """Warn (`CapturedNumberWarning`) when `function` reads module-level numbers;
-    `what` names it in the message ("the Lagrangian L")."""
+    `what` names it in the message ("the Lagrangian L"). Returns them, {name: value}
+    (empty for None), for `captured_identity`."""
     if function is None:
-        return
+        return {}
     found = captured_numbers(function)
     if not found:
-        return
+        return found
     shown = ", ".join(f"{name} = {_short(value)}" for name, value in found.items())
     first = next(iter(found))
     warnings.warn(
         f"{what} reads the module-level number(s) {shown}. Compiling freezes their "
-        f"current values into the program, which is reused on every later call: "
-        f"rebinding {first} afterwards silently gives the results for the old "
-        f"value. Pass numbers that may change through args — define "
-        f"(q, qdot, t, args) or (q, p, t, args) and call simulate(..., args=...) — "
-        f"or, for a true constant, name it in UPPER_CASE (not warned about)",
+        f"current values into the program of this system object, which is reused "
+        f"on every later run of it: rebinding {first} afterwards silently gives the "
+        f"results for the old value with this object (a system built after the "
+        f"rebinding reads the new one). Pass numbers that may change through args — "
+        f"define (q, qdot, t, args) or (q, p, t, args) and call "
+        f"simulate(..., args=...) — or, for a true constant, name it in UPPER_CASE "
+        f"(not warned about)",
         CapturedNumberWarning,
         stacklevel=_caller_stacklevel(),
     )
+    return found
+
+
+def captured_identity(*found: dict[str, Any]) -> tuple[tuple[str, str], ...]:
+    """The captured numbers' values at construction as a hashable, comparable key:
+    (name, fingerprint) pairs, the fingerprint being the dtype, shape and a digest
+    of the bytes (so that NaN equals itself and a large array stays small).
+
+    Held as a static field of the system, it makes two systems built before and
+    after a rebinding unequal, and `eqx.filter_jit` compiles anew for the second.
+    """
+    pairs = {}
+    for numbers in found:
+        for name, value in numbers.items():
+            pairs.setdefault(name, _fingerprint(value))
+    return tuple(sorted(pairs.items()))
+
+
+def _fingerprint(value: Any) -> str:
+    array = np.asarray(value)
+    digest = hashlib.blake2b(np.ascontiguousarray(array).tobytes(), digest_size=16)
+    return f"{array.dtype.str}{array.shape}:{digest.hexdigest()}"
 
 
 def captured_numbers(function: Callable) -> dict[str, Any]:

@@ -38,7 +38,10 @@ from lagjax._linalg.small_gradient import small_gradient
 from lagjax.mechanics.abstract_hamiltonian import (
     AbstractHamiltonian as AbstractHamiltonian,
 )
-from lagjax.mechanics.captured_globals import warn_captured_numbers
+from lagjax.mechanics.captured_globals import (
+    captured_identity,
+    warn_captured_numbers,
+)
 from lagjax.mechanics.declared_structure import check_declared_quadratic
 from lagjax.mechanics.functions import as_system_function
 from lagjax.mechanics.lagrangian import Lagrangian
@@ -92,7 +95,10 @@ class Hamiltonian(AbstractUserHamiltonian):
     Legendre transform to L a single linear solve.
 
     H is compiled once and reused: numbers it reads from module globals are frozen
-    at their value of the first run (rebinding them later changes nothing). Pass
+    at their value of the first run (rebinding them later changes nothing for this
+    object; their values at construction are part of its identity, the static
+    field `captured`, so a `Hamiltonian(H)` built after the rebinding compiles
+    anew and reads the new value). Pass
     numbers that vary through `args`; a `CapturedNumberWarning` is raised here when
     H reads a module-level number not named in UPPER_CASE
     (`lagjax.mechanics.captured_globals`). The same holds for `SeparableHamiltonian`'s
@@ -102,11 +108,13 @@ class Hamiltonian(AbstractUserHamiltonian):
     function: Callable = eqx.field(converter=as_system_function)
     arity: int = eqx.field(static=True)
     quadratic_in_momentum: bool = eqx.field(static=True)
+    # The module-level numbers H reads, as built (`captured_identity`).
+    captured: tuple = eqx.field(static=True, repr=False)
 
     def __init__(self, H: Callable, *, quadratic_in_momentum: bool = False):
         self.function = H
         self.arity = positional_arity(H, minimum=2, maximum=4, what="the Hamiltonian H")
-        warn_captured_numbers(H, "the Hamiltonian H")
+        self.captured = captured_identity(warn_captured_numbers(H, "the Hamiltonian H"))
         self.quadratic_in_momentum = quadratic_in_momentum
 
     def __call__(self, q: Any, p: Any, t: Any = 0.0, args: Any = None) -> jax.Array:
@@ -130,6 +138,8 @@ class SeparableHamiltonian(AbstractUserHamiltonian):
     potential: Callable = eqx.field(converter=as_system_function)
     potential_arity: int = eqx.field(static=True)
     quadratic_in_momentum: bool = eqx.field(static=True)
+    # The module-level numbers T and V read, as built (`captured_identity`).
+    captured: tuple = eqx.field(static=True, repr=False)
 
     def __init__(
         self, T: Callable, V: Callable, *, quadratic_in_momentum: bool = False
@@ -142,8 +152,10 @@ class SeparableHamiltonian(AbstractUserHamiltonian):
         self.potential_arity = positional_arity(
             V, minimum=1, maximum=3, what="the potential energy V"
         )
-        warn_captured_numbers(T, "the kinetic energy T")
-        warn_captured_numbers(V, "the potential energy V")
+        self.captured = captured_identity(
+            warn_captured_numbers(T, "the kinetic energy T"),
+            warn_captured_numbers(V, "the potential energy V"),
+        )
         self.quadratic_in_momentum = quadratic_in_momentum
 
     def default_method(self, dt: Any) -> DefaultMethod:

@@ -38,7 +38,10 @@ from lagjax._core.terms import (
     RattleTerm,
 )
 from lagjax._linalg.small_solves import singular_check as singular_check
-from lagjax.mechanics.captured_globals import warn_captured_numbers
+from lagjax.mechanics.captured_globals import (
+    captured_identity,
+    warn_captured_numbers,
+)
 from lagjax.mechanics.constraints import (
     Constraints,
     constrained_motion,
@@ -63,6 +66,20 @@ from lagjax.mechanics.signature import (
     check_scalar,
     positional_arity,
 )
+
+
+def refuse_no_coordinates(q: Any) -> None:
+    """q must hold at least one number: with none there is no motion to derive, and
+    the mass-matrix solve has nothing to factor (checked on shapes: free under jit)."""
+    leaves = jax.tree_util.tree_leaves(q)
+    if sum(jnp.size(leaf) for leaf in leaves) == 0:
+        shapes = [jnp.shape(leaf) for leaf in leaves]
+        raise ValueError(
+            f"q has no coordinates (shape {shapes[0] if len(shapes) == 1 else shapes}"
+            "): a system needs at least one; pass q with one entry per coordinate, "
+            "e.g. jnp.array([0.1]) for one (an empty array often comes from slicing "
+            "or from jnp.zeros(n) with n = 0)"
+        )
 
 
 class Lagrangian(AbstractSystem):
@@ -93,9 +110,12 @@ class Lagrangian(AbstractSystem):
     `t` defaults to 0.0 and `args` to None in every method.
 
     **What is compiled, and when.** `simulate` compiles L once and reuses the
-    program for every later run with the same function: numbers L reads from
-    module globals (`g = 9.81` used inside L) are frozen at their value of the
-    first run, and rebinding them later silently changes nothing. Pass numbers
+    program for every later run of the same system: numbers L reads from module
+    globals (`g = 9.81` used inside L) are frozen at their value of the first run,
+    and rebinding them later silently changes nothing for this `Lagrangian` object.
+    Their values at construction are part of the system's identity (the static
+    field `captured`), so a `Lagrangian(L)` built after the rebinding compiles anew
+    and reads the new value. Pass numbers
     that vary through `args` (`L(q, qdot, t, args)`, `simulate(..., args=...)`),
     which are traced: a new value reuses the compilation. A `CapturedNumberWarning`
     is raised here when L (or `force`, `dissipation`) reads a module-level number
@@ -111,6 +131,8 @@ class Lagrangian(AbstractSystem):
     quadratic_in_velocity: bool = eqx.field(static=True)
     constraints: Constraints | None
     formulation: str = eqx.field(static=True)
+    # The module-level numbers L, Q and D read, as built (`captured_identity`).
+    captured: tuple = eqx.field(static=True, repr=False)
 
     def __init__(
         self,
@@ -124,9 +146,11 @@ class Lagrangian(AbstractSystem):
     ):
         self.function = L
         self.arity = positional_arity(L, minimum=2, maximum=4, what="the Lagrangian L")
-        warn_captured_numbers(L, "the Lagrangian L")
-        warn_captured_numbers(force, "the force Q")
-        warn_captured_numbers(dissipation, "the dissipation function D")
+        self.captured = captured_identity(
+            warn_captured_numbers(L, "the Lagrangian L"),
+            warn_captured_numbers(force, "the force Q"),
+            warn_captured_numbers(dissipation, "the dissipation function D"),
+        )
         self.force = force
         self.force_arity = (
             0
@@ -211,6 +235,7 @@ class Lagrangian(AbstractSystem):
         `False` skips the test (an exactly singular matrix still gives inf/NaN).
         """
         check_same_structure(q, qdot, "q", "qdot")
+        refuse_no_coordinates(q)
         check = singular_check(check, q, qdot, t)
         self(q, qdot, t, args)  # trace-time checks of L's output; no run-time cost
         if self.constraints is None:
@@ -234,6 +259,7 @@ class Lagrangian(AbstractSystem):
         if self.constraints is None:
             raise ValueError("this Lagrangian has no constraints")
         check_same_structure(q, qdot, "q", "qdot")
+        refuse_no_coordinates(q)
         if scalar_constraints_apply(self, q):
             force = self.generalized_force(q, qdot, t, args)
             return scalar_constrained_motion(

@@ -141,6 +141,12 @@ def _flat_pair(state: Any, names: tuple[str, str]) -> tuple[jax.Array, Callable,
             f"{names[0]} and {names[1]} must have the same structure; got "
             f"{first.shape[0]} and {second.shape[0]} numbers"
         )
+    if first.shape[0] == 0:
+        raise ValueError(
+            f"the equilibrium's {names[0]} has no coordinates (shape "
+            f"{jnp.shape(state[0])}): linearize needs at least one; pass {names[0]} "
+            "with one entry per coordinate, e.g. jnp.array([0.0]) for one"
+        )
     return jnp.concatenate([first, second]), unravel, first.shape[0]
 
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from typing import ClassVar
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -29,6 +30,10 @@ from lagjax.scenes.base import (
     concrete,
     parameter,
 )
+
+# The steady state q = A cos(Ωt − δ) has two unknowns; a few more samples than two
+# keep the least-squares fit determined.
+_FIT_SAMPLES = 4
 
 
 def _spring_lagrangian(q, qdot, t, scene):
@@ -155,13 +160,16 @@ class DampedDrivenOscillator(AbstractScene):
 
         The response is fitted after `settling_time` (the run must reach beyond
         it); the decay rate is ln(E(0)/E(t₁))/t₁ over the run, which equals γ for
-        a free run whose t₁ is a multiple of π/ω_d.
+        a free run whose t₁ is a multiple of π/ω_d. A driven run that saved fewer
+        than `_FIT_SAMPLES` states after `settling_time` cannot show the steady
+        state: refused (`ValueError`, "not judged" in the command; under `jit` a
+        run-time error) rather than compared as a fit of nothing (amplitude 0).
         """
+        amplitude, lag = self._judged_response(trajectory)  # first: it may refuse
         exact_q, exact_qdot = self.exact_solution(trajectory.ts)
         energy = trajectory.energy()
         exact_energy = self.energy(exact_q, exact_qdot)
         start_energy, t_end = self.energy(*self.initial_state()), trajectory.ts[-1]
-        amplitude, lag = self.measured_response(trajectory)
         return {
             "q(t)": (trajectory.q, exact_q),
             "energy": (energy, exact_energy),
@@ -172,6 +180,32 @@ class DampedDrivenOscillator(AbstractScene):
                 jnp.log(start_energy / exact_energy[-1]) / t_end,
             ),
         }
+
+    def _judged_response(self, trajectory) -> tuple[jax.Array, jax.Array]:
+        """`measured_response`, or an error when the run ends before the steady
+        state (a free run, F₀ = 0, settles to rest: judged at any length)."""
+        settled = jnp.sum(trajectory.ts >= self.settling_time())
+        short = (settled < _FIT_SAMPLES) & (self.drive_amplitude != 0)
+        needed = self.settling_time() + 4 * jnp.pi / self.drive_frequency
+        values = concrete(short, settled, trajectory.ts[-1], needed)
+        if values is None:
+            response = self.measured_response(trajectory)
+            return eqx.error_if(response, short, self._too_short_message())
+        too_short, count, t_end, t1 = values
+        if too_short:
+            saved = f"; this run saved {int(count)} (it ends at t = {float(t_end):.4g})"
+            raise ValueError(self._too_short_message(saved, f" = {float(t1):.4g}"))
+        return self.measured_response(trajectory)
+
+    def _too_short_message(self, saved: str = "", t1: str = "") -> str:
+        return (
+            f"{type(self).__name__}.checks cannot judge the steady-state response on "
+            "this run: it is fitted to the states saved after the transient has "
+            "died out, t ≥ settling_time() = 40/γ, and needs at least "
+            f"{_FIT_SAMPLES} of them{saved}. Run two drive periods past it, to "
+            f"t1 ≥ 40/γ + 4π/Ω{t1}, saving along the way (e.g. "
+            "ts=jnp.linspace(0, t1, 2001))"
+        )
 
     def diagnostic(self, trajectory) -> Diagnostic:
         """The energy E(t), lost to friction and fed by the drive, vs closed form."""

@@ -128,20 +128,32 @@ def stage_failure_message(solver: diffrax.AbstractSolver) -> str:
     diffrax's own and cannot say why); the run's diagnosis adds this message.
     """
     name = type(solver).__name__
+    # Two causes look alike from inside the step: the iteration fails both on a
+    # stiff problem and where the equations of motion stop defining the motion.
+    degenerate = (
+        "Or the mass matrix ∂²L/∂q̇² (the Hessian ∂²H/∂p² of a Hamiltonian) became "
+        "singular or degenerate along the way, where the equations of motion do not "
+        "determine the acceleration (L = ½ q² q̇² at q = 0): no step size or root "
+        "finder gets past that point; end the run before it (a smaller t1), or write "
+        "L in coordinates where the mass matrix stays invertible. To see which, run "
+        "simulate(..., throw=False) and look at the last finite states."
+    )
     if isinstance(solver, AbstractGaussLegendre) and isinstance(
         solver.root_finder, StageIteration
     ):
         return (
-            f"The implicit stage equations of {name} did not converge: its default "
-            "fixed-point iteration converges only while dt times the fastest "
-            "frequency of the system is below about 1 (a stiff spring, a fast "
-            f"rotation). Pass {name}(root_finder=optimistix.Newton(rtol=1e-12, "
-            "atol=1e-12)), which converges at any step, or reduce dt."
+            f"The implicit stage equations of {name} did not converge. Either the "
+            "problem is stiff at this step: the default fixed-point iteration "
+            "converges only while dt times the fastest frequency of the system is "
+            "below about 1 (a stiff spring, a fast rotation); reduce dt, or pass "
+            f"{name}(root_finder=optimistix.Newton(rtol=1e-12, atol=1e-12)), which "
+            f"converges at much larger steps. {degenerate}"
         )
     return (
-        f"The implicit stage equations of {name} did not converge at this step: "
-        "reduce dt, or loosen the root finder's atol (round-off in the residual "
-        "grows like eps·dt·|df/dy|·|y|), or raise root_find_max_steps."
+        f"The implicit stage equations of {name} did not converge at this step. "
+        "Either the step is too large for the root finder: reduce dt, loosen the "
+        "root finder's atol (round-off in the residual grows like "
+        f"eps·dt·|df/dy|·|y|), or raise root_find_max_steps. {degenerate}"
     )
 
 

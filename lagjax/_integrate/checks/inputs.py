@@ -17,6 +17,7 @@ are checked. Every refusal names the problem and what to do instead:
 | `args` | a NaN anywhere (infinities are allowed) | finite parameters |
 | `y0` | float64 arrays while JAX's x64 mode is off (a warning) | `jax.config.update("jax_enable_x64", True)` |
 | `ts` | NaN, not 1-D, unsorted, outside [t0, t1] | sorted times inside the span |
+| `ts` with `saveat` | both given (`saveat` would drop `ts`) | one of them (`check_save_choice`) |
 | `y0` | not a pair; q and its partner of different structure or shape; no coordinates (q0 of size 0); NaN/inf; float16; complex or boolean | `(q0, qdot0)` / `(q0, p0)` of matching shapes, float32/64 |
 | `y0` of a `RigidBody` | quaternion not of shape (4,), zero; momentum not (3,) | a unit quaternion, e.g. `(1, 0, 0, 0)` |
 | `rtol`, `atol` | NaN, negative, or both zero | positive tolerances |
@@ -397,6 +398,18 @@ def check_save_times(ts: Any, t0: Any, t1: Any) -> None:
             f"ts[{k}] = {times[k]} lies outside [t0, t1] = [{start}, {end}]; save "
             "times must lie inside the run (extend t1 or drop that time)"
         )
+
+
+def check_save_choice(ts: Any, saveat: Any) -> None:
+    """`ts` and `saveat` both say what to save: given together, one would be
+    dropped silently (`saveat` wins inside the run)."""
+    if ts is None or saveat is None:
+        return
+    raise ValueError(
+        "simulate got both ts and saveat, which both say what to save; pass one: "
+        "ts=... alone, or saveat=diffrax.SaveAt(ts=..., ...) with the times inside "
+        "it (SaveAt can also combine them with t0=True, t1=True or dense=True)"
+    )
 
 
 def _concrete_scalar(value: Any, name: str) -> float | None:
