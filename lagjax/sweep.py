@@ -29,6 +29,7 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from lagjax._integrate.simulate import System, simulate
+from lagjax._integrate.taylor_members import runs_on_taylor_batch, taylor_members
 from lagjax._sweep.processes import (
     check_a_chunk_for_every_process,
     chunks_of_this_process,
@@ -138,8 +139,13 @@ def _first_member(tree: Any) -> Any:
 
 @eqx.filter_jit
 def _simulate_members(system, shared_args, simulate_kwargs, members):
-    """vmap of `simulate` over (y0, args) members; compiled once per configuration
-    (the system, solver and options are hashable Modules and numbers)."""
+    """vmap of `simulate` over (y0, args) members — or, for `lj.Taylor()`, the
+    batch-native Taylor loop (`lagjax._integrate.taylor_members`); compiled once
+    per configuration (the system, solver and options are hashable Modules and
+    numbers)."""
+
+    if runs_on_taylor_batch(simulate_kwargs):  # one order, a step per member
+        return taylor_members(system, shared_args, simulate_kwargs, members)
 
     def one(member):
         y0, args = member

@@ -239,7 +239,7 @@ def simulate_taylor(
     }
     return Trajectory(
         ts=solution.ts, ys=jax.vmap(unravel)(solution.ys), system=system, args=args,
-        run_stats=stats, result=_as_diffrax_result(solution.result),
+        run_stats=stats, result=as_diffrax_result(solution.result),
         solver_name=f"Taylor[{solver.backend}]",
     )  # fmt: skip
 
@@ -253,7 +253,7 @@ def _unravel_rows(field: FlatVectorField, flat_ys: np.ndarray) -> Any:
     return jax.tree_util.tree_unflatten(treedef, leaves)
 
 
-def _as_diffrax_result(result: Any) -> Any:
+def as_diffrax_result(result: Any) -> Any:
     """The Taylor integrator's codes are diffrax's plus `non_finite`."""
     finite = result != TAYLOR_RESULTS.non_finite
     return diffrax.RESULTS.where(
