@@ -1,5 +1,8 @@
-"""Taylor-series integration of the derived equations (issue 28)."""
+"""Taylor-series integration of the derived equations: one trajectory
+(`taylor_integrate`), a batch (`taylor_integrate_batch`), or `lj.Taylor` in
+`simulate` and `lj.sweep`."""
 
+from .batch import taylor_integrate_batch as taylor_integrate_batch
 from .coefficients import taylor_coefficients as taylor_coefficients
 from .integrate import RESULTS as RESULTS
 from .integrate import TaylorSolution as TaylorSolution
