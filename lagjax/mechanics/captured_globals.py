@@ -93,8 +93,8 @@ def warn_captured_numbers(function: Callable | None, what: str) -> dict[str, Any
 
 def captured_identity(*found: dict[str, Any]) -> tuple[tuple[str, str], ...]:
     """The captured numbers' values at construction as a hashable, comparable key:
-    (name, fingerprint) pairs, the fingerprint being the dtype, shape and a digest
-    of the bytes (so that NaN equals itself and a large array stays small).
+    (name, fingerprint) pairs, the fingerprint a string (`_fingerprint`), so that
+    NaN equals itself and a large array stays small.
 
     Held as a static field of the system, it makes two systems built before and
     after a rebinding unequal, and `eqx.filter_jit` compiles anew for the second.
@@ -107,7 +107,12 @@ def captured_identity(*found: dict[str, Any]) -> tuple[tuple[str, str], ...]:
 
 
 def _fingerprint(value: Any) -> str:
+    """A number as its dtype and exact repr ("<f8 9.81"); an array as its dtype,
+    shape and digest. Printed with the system, it also tells `lj.sweep`'s store
+    (which fingerprints the system's printout) that the number changed."""
     array = np.asarray(value)
+    if array.ndim == 0:
+        return f"{array.dtype.str} {array.item()!r}"
     digest = hashlib.blake2b(np.ascontiguousarray(array).tobytes(), digest_size=16)
     return f"{array.dtype.str}{array.shape}:{digest.hexdigest()}"
 

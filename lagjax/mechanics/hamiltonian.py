@@ -109,7 +109,7 @@ class Hamiltonian(AbstractUserHamiltonian):
     arity: int = eqx.field(static=True)
     quadratic_in_momentum: bool = eqx.field(static=True)
     # The module-level numbers H reads, as built (`captured_identity`).
-    captured: tuple = eqx.field(static=True, repr=False)
+    captured: tuple = eqx.field(static=True)
 
     def __init__(self, H: Callable, *, quadratic_in_momentum: bool = False):
         self.function = H
@@ -139,7 +139,7 @@ class SeparableHamiltonian(AbstractUserHamiltonian):
     potential_arity: int = eqx.field(static=True)
     quadratic_in_momentum: bool = eqx.field(static=True)
     # The module-level numbers T and V read, as built (`captured_identity`).
-    captured: tuple = eqx.field(static=True, repr=False)
+    captured: tuple = eqx.field(static=True)
 
     def __init__(
         self, T: Callable, V: Callable, *, quadratic_in_momentum: bool = False

@@ -132,7 +132,7 @@ class Lagrangian(AbstractSystem):
     constraints: Constraints | None
     formulation: str = eqx.field(static=True)
     # The module-level numbers L, Q and D read, as built (`captured_identity`).
-    captured: tuple = eqx.field(static=True, repr=False)
+    captured: tuple = eqx.field(static=True)
 
     def __init__(
         self,
