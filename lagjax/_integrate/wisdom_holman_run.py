@@ -13,9 +13,11 @@ coordinates. Saves lie on the step grid $t_0 + k\,h$: the corrector and the
 method's error belong to one step size, so a save between steps would need a
 different map; a time off the grid is refused with the step that would reach it.
 
-The loop is one `lax.scan` of the exact step count (`jit`, `vmap`, `jax.jvp`,
-`jax.grad`); it records $u_k$ at the save steps (one slot per distinct step, O(1)
-work per step) and synchronises them after the loop. A Kepler drift that does not
+The loop runs the exact step count as nested `lax.scan`s — the steps to the
+first save, then one inner scan per save interval, whose outputs are the $u_k$ to
+save (`jit`, `vmap`, `jax.jvp`, `jax.grad`; save times at uneven spacings take an
+inner loop of the gap's length, forward mode only) — and synchronises the saved
+states after the loop. A Kepler drift that does not
 converge, or a non-finite state, ends the run: the saves from that step on are NaN
 and `traj.result` says why (an error unless `throw=False`).
 
@@ -86,16 +88,8 @@ def run_wisdom_holman(
     trajectory = _compiled_run(
         system, args, y0, solver, jnp.asarray(dt, dtype), steps,
         tuple(int(k) for k in distinct), tuple(int(i) for i in slot_of_save),
-        jnp.asarray(save_ts, dtype),
+        jnp.asarray(save_ts, dtype), throw,
     )  # fmt: skip
-    if throw:
-        trajectory = eqx.error_if(
-            trajectory,
-            trajectory.result != RESULTS.successful,
-            f"{solver.name}: a Kepler drift did not converge or the state became "
-            "non-finite (two bodies met, or a body fell into the star): see "
-            "traj.result with throw=False",
-        )
     return trajectory
 
 
@@ -139,8 +133,9 @@ def _check_bodies(bodies: Any, y0: Any, solver: WisdomHolman) -> None:
             )
     if isinstance(masses, Tracer):
         return
+    masses = np.asarray(masses)
     central = float(masses[0])
-    if not central > 0 or not bool(jnp.all(masses > 0)):
+    if not central > 0 or not np.all(masses > 0):
         raise ValueError(
             f"{solver.name}: the central mass masses[0] = {central:g} and every "
             f"other mass must be positive; got masses = {np.asarray(masses)}"
@@ -171,14 +166,13 @@ def _save_steps(save_ts: np.ndarray, t0: float, dt: float, solver) -> np.ndarray
 
 class _Carry(NamedTuple):
     u: Any  # the state half a drift ahead, u = D_{h/2} y
-    next_slot: jax.Array  # the first distinct save step not yet reached
-    slots: Any  # u at each distinct save step, and a spare that takes other writes
+    step: jax.Array  # steps taken
     failed_at: jax.Array  # the first step whose drift failed (steps + 1: none)
 
 
 @eqx.filter_jit
 def _compiled_run(
-    system, bodies, y0, solver, h, steps, distinct, slot_of_save, save_ts
+    system, bodies, y0, solver, h, steps, distinct, slot_of_save, save_ts, throw
 ) -> Trajectory:
     """The boundary conversions, the loop and the `Trajectory` (module docstring)."""
     masses = bodies.masses
@@ -188,40 +182,50 @@ def _compiled_run(
         h, ~valid, "WisdomHolman: the masses and G must be positive (masses[0] first)"
     )
     u, ok_start = solver.enter(term, to_jacobi(masses, *y0), h)
-    targets = jnp.asarray((*distinct, -1), jnp.int32)
-    spare = len(distinct)
-    slots = jax.tree_util.tree_map(
-        lambda x: jnp.zeros((spare + 1, *x.shape), x.dtype), u
-    )
 
-    def record(carry: _Carry, step: jax.Array) -> _Carry:
-        hit = targets[carry.next_slot] == step
-        slot = jnp.where(hit, carry.next_slot, spare)
-        slots = jax.tree_util.tree_map(
-            lambda buffer, x: buffer.at[slot].set(x), carry.slots, carry.u
-        )
-        return carry._replace(next_slot=carry.next_slot + hit, slots=slots)
-
-    def advance(carry: _Carry, step: jax.Array) -> tuple[_Carry, None]:
+    def advance(carry: _Carry, _: Any = None) -> tuple[_Carry, None]:
         u, converged = term.drift(term.kick(carry.u, h), h)
+        step = carry.step + 1
         healthy = converged & _finite(u)
         failed_at = jnp.where(
             healthy | (carry.failed_at <= steps), carry.failed_at, step
         )
-        carry = carry._replace(u=u, failed_at=failed_at)
-        return record(carry, step), None
+        return _Carry(u, step, failed_at), None
+
+    def run_steps(carry: _Carry, count: int) -> _Carry:
+        return carry if count == 0 else lax.scan(advance, carry, None, count)[0]
 
     never = jnp.asarray(steps + 1, jnp.int32)
     failed_at = jnp.where(ok_start & _finite(u), never, 0)
-    start = _Carry(u, jnp.zeros((), jnp.int32), slots, failed_at)
-    carry = record(start, jnp.zeros((), jnp.int32))
-    carry, _ = lax.scan(advance, carry, jnp.arange(1, steps + 1, dtype=jnp.int32))
+    carry = run_steps(_Carry(u, jnp.zeros((), jnp.int32), failed_at), distinct[0])
+    first = carry.u
+    # Saves at a uniform spacing: nested scans of static lengths (reverse mode
+    # works); other spacings: an inner loop of the gap's length (forward mode).
+    gaps = np.diff(distinct)
+    if gaps.size and np.all(gaps == gaps[0]):
+
+        def segment(carry: _Carry, _: Any) -> tuple[_Carry, Any]:
+            carry = run_steps(carry, int(gaps[0]))
+            return carry, carry.u
+
+        carry, later = lax.scan(segment, carry, None, gaps.size)
+    elif gaps.size:
+
+        def segment(carry: _Carry, gap: jax.Array) -> tuple[_Carry, Any]:
+            carry = lax.fori_loop(0, gap, lambda _, c: advance(c)[0], carry)
+            return carry, carry.u
+
+        carry, later = lax.scan(segment, carry, jnp.asarray(gaps, jnp.int32))
+    else:
+        later = jax.tree_util.tree_map(lambda x: x[None][:0], first)
+    per_slot = jax.tree_util.tree_map(
+        lambda x, rest: jnp.concatenate([x[None], rest]), first, later
+    )
 
     def synchronised(u_k):
         y_k, converged = solver.leave(term, u_k, h)
         return to_inertial(masses, *y_k), converged
 
-    per_slot = jax.tree_util.tree_map(lambda buffer: buffer[:spare], carry.slots)
     states, ok_saves = jax.vmap(synchronised)(per_slot)
     order = np.asarray(slot_of_save)
     reached = jnp.asarray(distinct)[order] < carry.failed_at
@@ -234,6 +238,14 @@ def _compiled_run(
         RESULTS.successful,  # pyright: ignore[reportArgumentType]
         RESULTS.kepler_not_converged,
     )
+    if throw:
+        q = eqx.error_if(
+            q,
+            result != RESULTS.successful,
+            "WisdomHolman: a Kepler drift did not converge or the state became "
+            "non-finite (two bodies met, or a body fell into the star): see "
+            "traj.result with throw=False",
+        )
     stats = dict(
         num_steps=jnp.asarray(steps),
         num_accepted_steps=jnp.asarray(steps),
