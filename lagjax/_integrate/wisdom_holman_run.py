@@ -204,18 +204,18 @@ def _compiled_run(
     gaps = np.diff(distinct)
     if gaps.size and np.all(gaps == gaps[0]):
 
-        def segment(carry: _Carry, _: Any) -> tuple[_Carry, Any]:
+        def uniform_segment(carry: _Carry, _: Any) -> tuple[_Carry, Any]:
             carry = run_steps(carry, int(gaps[0]))
             return carry, carry.u
 
-        carry, later = lax.scan(segment, carry, None, gaps.size)
+        carry, later = lax.scan(uniform_segment, carry, None, gaps.size)
     elif gaps.size:
 
-        def segment(carry: _Carry, gap: jax.Array) -> tuple[_Carry, Any]:
+        def uneven_segment(carry: _Carry, gap: jax.Array) -> tuple[_Carry, Any]:
             carry = lax.fori_loop(0, gap, lambda _, c: advance(c)[0], carry)
             return carry, carry.u
 
-        carry, later = lax.scan(segment, carry, jnp.asarray(gaps, jnp.int32))
+        carry, later = lax.scan(uneven_segment, carry, jnp.asarray(gaps, jnp.int32))
     else:
         later = jax.tree_util.tree_map(lambda x: x[None][:0], first)
     per_slot = jax.tree_util.tree_map(
