@@ -178,3 +178,17 @@ def test_light_damping_energy_decays_as_exp_minus_gamma_t():
     # Within a half-period E is not a pure exponential: it wiggles about it.
     wiggle = energy * np.exp(0.05 * ts) / energy[0]
     assert 1e-3 < np.ptp(wiggle) < 0.1
+
+
+def test_a_free_damped_run_judges_no_steady_state_phase():
+    # No drive: the steady state has amplitude 0 and no phase; the other checks
+    # still hold against the closed form.
+    scene = lj.scenes.DampedDrivenOscillator(drive_amplitude=0.0)
+    ts = jnp.linspace(0.0, 60.0, 601)
+    run = lj.simulate(scene, scene.initial_state(), t1=60.0, ts=ts)
+    checks = scene.checks(run)
+    assert "steady-state phase" not in checks
+    measured, exact = checks["q(t)"]
+    np.testing.assert_allclose(measured, exact, atol=1e-6)
+    amplitude, expected = checks["steady-state amplitude"]
+    assert float(expected) == 0.0 and abs(float(amplitude)) < 1e-6
