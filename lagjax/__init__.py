@@ -35,6 +35,9 @@ from lagjax.mechanics.canonical import GeneratingFunction as GeneratingFunction
 from lagjax.mechanics.canonical import is_canonical as is_canonical
 from lagjax.mechanics.canonical import symplectic_defect as symplectic_defect
 from lagjax.mechanics.canonical import symplectic_form as symplectic_form
+from lagjax.mechanics.captured_globals import (
+    CapturedNumberWarning as CapturedNumberWarning,
+)
 from lagjax.mechanics.constraints import Constraints as Constraints
 from lagjax.mechanics.euler_lagrange import (
     euler_lagrange_acceleration as euler_lagrange_acceleration,
@@ -84,6 +87,7 @@ from lagjax.solvers.splitting import Yoshida4 as Yoshida4
 from lagjax.solvers.splitting import Yoshida6 as Yoshida6
 from lagjax.solvers.time_transformed import TimeTransformed as TimeTransformed
 from lagjax.solvers.variational import VariationalMidpoint as VariationalMidpoint
+from lagjax.solvers.wisdom_holman import WisdomHolman as WisdomHolman
 from lagjax.sweep import sweep as sweep
 from lagjax.taylor.solver import Taylor as Taylor
 from lagjax.trajectory import Trajectory as Trajectory

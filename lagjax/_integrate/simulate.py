@@ -73,7 +73,9 @@ from lagjax._integrate.step_control import (
 )
 from lagjax._integrate.taylor_run import run_taylor
 from lagjax._integrate.time_transformed_run import run_time_transformed
+from lagjax._integrate.wisdom_holman_run import run_wisdom_holman
 from lagjax.solvers.time_transformed import TimeTransformed
+from lagjax.solvers.wisdom_holman import WisdomHolman
 from lagjax.taylor.solver import Taylor
 from lagjax.trajectory import Trajectory
 
@@ -166,6 +168,12 @@ def simulate(
                           dense=dense, event=event, progress=progress,
                           stepsize_controller=stepsize_controller,
                           progress_meter=progress_meter)  # fmt: skip
+    if isinstance(solver, WisdomHolman):  # Jacobi coordinates, saves on the step grid
+        return run_wisdom_holman(system, y0, t0, t1, dt, solver, ts, args, max_steps,
+                                 throw, saveat=saveat, adjoint=adjoint, dense=dense,
+                                 event=event, progress=progress,
+                                 stepsize_controller=stepsize_controller,
+                                 progress_meter=progress_meter)  # fmt: skip
     if isinstance(solver, TimeTransformed):  # dt is the fictitious step ds
         return run_time_transformed(system, y0, t0, t1, dt, solver, ts, args,
                                     max_steps, throw, saveat=saveat, adjoint=adjoint,

@@ -33,6 +33,7 @@ from lagjax.scenes.oscillators import CoupledOscillators as CoupledOscillators
 from lagjax.scenes.oscillators import HarmonicOscillator as HarmonicOscillator
 from lagjax.scenes.pendulums import DoublePendulum as DoublePendulum
 from lagjax.scenes.pendulums import SimplePendulum as SimplePendulum
+from lagjax.scenes.planetary import PlanetarySystem as PlanetarySystem
 from lagjax.scenes.pythagorean import PythagoreanThreeBody as PythagoreanThreeBody
 from lagjax.scenes.rigid import EarthFreePrecession as EarthFreePrecession
 from lagjax.scenes.rigid import HeavySymmetricTop as HeavySymmetricTop
@@ -60,6 +61,7 @@ __all__ = [  # noqa: RUF022
     "BeadOnRotatingWire",
     "KeplerCartesian",
     "KeplerPolar",
+    "PlanetarySystem",
     "PythagoreanThreeBody",
     "ChargeInUniformFields",
     "AtwoodMachine",
