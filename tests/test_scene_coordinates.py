@@ -7,6 +7,7 @@ exact solution of the linearised Foucault equation instead of a run.
 
 from typing import ClassVar
 
+import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -146,12 +147,18 @@ def _texts(figure) -> list[str]:
 def test_the_foucault_figure_has_named_axes_and_the_plane_against_its_rate():
     scene = scenes.FoucaultPendulum(earth_rate=0.01)
     path = linear_foucault(scene, jnp.linspace(0.0, 150.0, 3001))
-    figure = run_figure("foucault-pendulum", scene, path)
+    # The figure reads a trajectory's system and args (its energy panel's scale).
+    system, args = scene.resolve(None)
+    exact = lj.Trajectory(
+        ts=path.ts, ys=path.ys, system=system, args=args, run_stats={},
+        result=diffrax.RESULTS.successful, solver_name="exact (linearised)",
+    )  # fmt: skip
+    figure = run_figure("foucault-pendulum", scene, exact)
     texts = _texts(figure)
     plt.close(figure)
     assert "x (south), y (east) [m]" in texts
     assert "swing-plane angle θ(t) − θ(0) [rad]" in texts
-    assert "−ω_E sin φ · t" in texts and "|E − E₀| / |E₀|" in texts
+    assert "−ω_E sin φ · t" in texts and "|E − E₀| / (|E₀| + |p₀·q̇₀|)" in texts
     assert any(text.startswith("t [s]") for text in texts)
     assert "precession rate" in texts  # the check, measured on each sixth
 
