@@ -248,3 +248,24 @@ def test_a_new_lagrangian_after_rebinding_g_gives_the_moon():
     on_moon, moon_closed = small_angle_final_angle(moon, MOON)
     np.testing.assert_allclose(on_earth, earth_closed, rtol=1e-6)
     np.testing.assert_allclose(on_moon, moon_closed, rtol=1e-6)
+
+
+GRAVITY = 9.81  # an UPPER_CASE "constant" a user rebinds all the same
+
+
+def constant_pendulum(q, qd):
+    return 0.5 * qd**2 + GRAVITY * jnp.cos(q)
+
+
+def test_a_rebound_upper_case_constant_is_part_of_the_identity_but_not_warned():
+    global GRAVITY
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", CapturedNumberWarning)  # not warned about
+        earth = lj.Lagrangian(constant_pendulum)
+        GRAVITY = MOON
+        try:
+            moon = lj.Lagrangian(constant_pendulum)
+        finally:
+            GRAVITY = EARTH
+        again = lj.Lagrangian(constant_pendulum)
+    assert earth != moon and earth == again

@@ -71,11 +71,14 @@ def warn_captured_numbers(function: Callable | None, what: str) -> dict[str, Any
     (empty for None), for `captured_identity`."""
     if function is None:
         return {}
-    found = captured_numbers(function)
-    if not found:
+    # Constants are part of the system's identity too (a rebound UPPER_CASE number
+    # then recompiles a new system), but not warned about.
+    found = captured_numbers(function, constants=True)
+    warned = {k: v for k, v in found.items() if not _is_constant(k, v)}
+    if not warned:
         return found
-    shown = ", ".join(f"{name} = {_short(value)}" for name, value in found.items())
-    first = next(iter(found))
+    shown = ", ".join(f"{name} = {_short(value)}" for name, value in warned.items())
+    first = next(iter(warned))
     warnings.warn(
         f"{what} reads the module-level number(s) {shown}. Compiling freezes their "
         f"current values into the program of this system object, which is reused "
@@ -117,9 +120,10 @@ def _fingerprint(value: Any) -> str:
     return f"{array.dtype.str}{array.shape}:{digest.hexdigest()}"
 
 
-def captured_numbers(function: Callable) -> dict[str, Any]:
+def captured_numbers(function: Callable, constants: bool = False) -> dict[str, Any]:
     """{name: value} of the module-level numbers `function` reads (see the module
-    docstring for what is and is not counted)."""
+    docstring for what is and is not counted; `constants`: UPPER_CASE names and
+    math/NumPy constants too)."""
     found: dict[str, Any] = {}
     visited: set[types.CodeType] = set()
 
@@ -135,7 +139,7 @@ def captured_numbers(function: Callable) -> dict[str, Any]:
             if name not in namespace:  # a builtin, or not defined yet
                 continue
             value = namespace[name]
-            if _is_number(value) and not _is_constant(name, value):
+            if _is_number(value) and (constants or not _is_constant(name, value)):
                 found.setdefault(name, value)
             elif _is_helper(value, namespace) and depth < _HELPER_DEPTH:
                 visit(value, depth + 1)
