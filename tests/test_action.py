@@ -149,6 +149,7 @@ def test_jit_and_gradient_follow_hamilton():
     assert relative_close(slope, expected_slope, 1e-10)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_batched_and_padded_trajectories():
     ts = jnp.linspace(0.0, T1, 129)
     speeds = jnp.array([-0.5, 0.0, 1.2, exact_qdot(0.0)])

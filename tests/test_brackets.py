@@ -150,6 +150,7 @@ def _bracket_identities(coefficients, z):
 _unit_floats = st.floats(-1.0, 1.0, allow_nan=False, allow_subnormal=False)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 @settings(max_examples=25, deadline=None)
 @example(  # f = g = h: both sides of the Leibniz rule are cancellations to 0
     coefficients=np.full((3, len(_MONOMIALS)), 0.96875), z=np.full(4, 0.984375)

@@ -58,6 +58,7 @@ def quadratic_lagrangian(mass):
     return lambda q, qd: 0.5 * qd @ mass @ qd - 0.5 * q @ q
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 @pytest.mark.parametrize("n", [2, 5, 8])
 def test_indefinite_mass_matrix_with_zero_leading_minor_is_solved(n):
     mass = indefinite_mass(n)

@@ -94,6 +94,7 @@ def test_a_solver_that_cannot_integrate_the_scene(scene, solver, message, capsys
     assert message in one_error_line(capsys)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_failed_stage_solve_names_newton(capsys):
     argv = ["run", "double-pendulum", "--solver", "GaussLegendre2", "--dt", "5"]
     assert main([*argv, "--t1", "10"]) == 1
@@ -102,6 +103,7 @@ def test_failed_stage_solve_names_newton(capsys):
     assert "root_finder=optimistix.Newton" in line
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_save_writes_exactly_the_named_file(tmp_path, capsys):
     target = tmp_path / "run-without-suffix"
     assert main(["run", "harmonic-oscillator", "--t1", "1", "--save", str(target)]) == 0

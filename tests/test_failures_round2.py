@@ -55,6 +55,7 @@ def test_legendre_inverse_stops_once_converged():
     assert len(calls) < 100, len(calls)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_relativistic_particle_gauss_legendre_3_returns_the_closed_form():
     y0 = (jnp.array([0.0, 0.0]), jnp.array([0.0, 1.2]))
     trajectory = lj.simulate(
@@ -189,7 +190,9 @@ def test_a_float32_step_below_the_resolution_of_time_is_refused():
 
 
 def test_float64_data_without_x64_warns():
-    with jax.enable_x64(False):
-        with pytest.warns(UserWarning, match=r"float32.*jax_enable_x64"):
-            lj.simulate(lj.Lagrangian(pendulum), (np.float64(1.0), np.float64(0.0)),
-                        t1=0.1, dt=0.01)  # fmt: skip
+    with (
+        jax.enable_x64(False),
+        pytest.warns(UserWarning, match=r"float32.*jax_enable_x64"),
+    ):
+        lj.simulate(lj.Lagrangian(pendulum), (np.float64(1.0), np.float64(0.0)),
+                    t1=0.1, dt=0.01)  # fmt: skip

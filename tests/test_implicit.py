@@ -336,6 +336,7 @@ def test_stage_equations_without_solution_are_reported():
 # -- batching -----------------------------------------------------------------------
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_vmapped_batch_equals_loop():
     keys = jax.random.split(jax.random.key(0), 2)
     q0s = jax.random.uniform(keys[0], (16, 2), minval=-2.0, maxval=2.0)

@@ -120,6 +120,7 @@ def _charged_lagrangian(x, v, t, args):
     return 0.5 * m * v @ v - e * (phi - a @ v)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_charged_particle_lorentz_force():
     m, e = 1.7, -0.6
     lag = lj.Lagrangian(_charged_lagrangian, quadratic_in_velocity=True)

@@ -53,6 +53,7 @@ def test_separable_hamiltonian_oscillator_is_exact():
     assert result.verdict() == "stable"
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_l4_in_hamiltonian_form():
     mu = jnp.asarray(0.01)
     hamiltonian = THREE_BODY.to_hamiltonian()

@@ -93,6 +93,7 @@ def _published_lnn_acceleration(lagrangian, q, qdot):
     return jnp.linalg.pinv(mass) @ (force - mixed @ qdot)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_lnn_acceleration_loss_matches_published_formula_and_gradient():
     net = LagrangianNet(_mlp(1))
     keys = jax.random.split(jax.random.key(2), 3)

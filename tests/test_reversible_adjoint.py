@@ -171,6 +171,7 @@ def test_the_run_itself_is_the_plain_scan():
     assert _relative_gap(runs[1].ys, runs[0].ys) < 1e-14
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_saved_states_feed_their_cotangents_in_at_their_times():
     system, y0, args = _kepler()
     ts = jnp.linspace(0.5, 12.0, 24)  # every 50 steps from step 50, run of 1200

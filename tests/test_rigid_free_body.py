@@ -105,6 +105,7 @@ def _unwrapped_angle(x, y):
     return np.unwrap(np.arctan2(np.asarray(y), np.asarray(x)))
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 @pytest.mark.parametrize(
     "moments", [(2.0, 2.0, 1.0), (1.0, 1.0, 1.8)], ids=["prolate", "oblate"]
 )

@@ -172,6 +172,7 @@ def test_euler_angle_and_quaternion_paths_agree(solver, dt, tolerance):
     assert np.max(jnp.abs(omega - from_rates)) < 100 * tolerance
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_gimbal_lock_is_a_clear_error_in_euler_angles_only():
     scene = HeavySymmetricTop()
     lagrangian = scene.system()

@@ -170,6 +170,7 @@ def test_projection_keeps_the_quaternion_unit():
     )
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_simulate_scan_path_vmap_and_grad():
     body, args = BODIES["heavy"]
     solver = RigidBodyVerlet(compensated=False)  # compiles fastest under grad
@@ -270,6 +271,7 @@ def test_symmetric_top_split_is_exact_for_a_symmetric_free_body(moments, method)
     assert min(errors("axes")) > 1e-5, errors("axes")
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_earth_wobble_period_to_round_off_at_an_hour_step():
     """Euler's 305-day free wobble with h = 1 h (ωh = 0.26): the symmetric-top split
     is the exact flow of the Earth's symmetric body; the axes split's commutator

@@ -163,6 +163,7 @@ def test_the_foucault_figure_has_named_axes_and_the_plane_against_its_rate():
     assert "precession rate" in texts  # the check, measured on each sixth
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_run_writes_the_plot_and_saves_every_step_of_a_default_run(tmp_path, capsys):
     plot, data = tmp_path / "run.png", tmp_path / "run.npz"
     argv = ["run", "harmonic-oscillator", "--t1", "2"]

@@ -89,6 +89,7 @@ def checks_at(checks, index):
     return {name: (m[index], e[index]) for name, (m, e) in checks.items()}
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 @pytest.mark.parametrize("form", FORMS, ids=lambda form: form.__name__)
 @pytest.mark.parametrize("index", range(len(ECCENTRICITIES)), ids=ECCENTRICITIES)
 def test_orbit_matches_keplers_equation_and_conserves_e_l_and_lenz(form, index):

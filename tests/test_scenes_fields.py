@@ -110,6 +110,7 @@ def test_charge_checks_pass(name):
         assert error <= TOLERANCE, f"{check}: relative error {error:.2e}"
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_measured_cyclotron_frequency_is_eb_over_m():
     # Ω = eB/m, signed: a positive charge turns clockwise about B (angle −Ωt).
     expected = {

@@ -104,6 +104,7 @@ def harmonic_sweep(stiffnesses):
     return checks, jnp.mod(jax.vmap(turned)(scenes, *ends), 2 * jnp.pi)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_harmonic_oscillator_exact_solution_and_action_angle_over_a_sweep():
     # A vmapped sweep over stiffness: each scene's run against its own closed form.
     # Yoshida6 at ωh ≤ 0.03 over ≤ 10 periods: phase error ~ (ωh)⁶ωt ≈ 1e-9.

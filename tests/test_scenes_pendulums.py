@@ -165,6 +165,7 @@ def test_double_pendulum_small_oscillation_frequencies_from_a_trajectory():
     assert np.allclose(refined, expected, rtol=1e-9, atol=0)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 @pytest.mark.parametrize(
     "t1", [100.0, pytest.param(1000.0, marks=pytest.mark.slow)], ids=["100s", "1000s"]
 )

@@ -70,6 +70,7 @@ def test_adaptive_default_and_final_state_only():
     assert int(traj.stats["num_rejected_steps"]) >= 0
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_lagrangian_through_gauss_legendre_conserves_energy():
     lag = lj.Lagrangian(double_pendulum, quadratic_in_velocity=True)
     y0 = (jnp.array([2.0, 2.5]), jnp.zeros(2))

@@ -141,6 +141,7 @@ def _closed_form_tangent(mass, rhs, dmass, drhs):
     return np.linalg.solve(mass, drhs - dmass @ x)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 @SIZES
 @pytest.mark.parametrize("solve", [solve_symmetric, _unjudged])
 def test_jvp_and_grad_match_the_closed_form_in_a_mixed_batch(solve, n):
@@ -196,6 +197,7 @@ def test_grad_through_simulate_matches_finite_differences():
     assert relative_close(gradient, np.array(finite), 1e-7)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_tangent_of_the_scalar_formulation_matches_finite_differences():
     n = 4  # the scalar formulation, whose 4–6 coordinates use the unrolled solve
     acceleration = jax.jit(lj.Lagrangian(n_link_lagrangian).acceleration)

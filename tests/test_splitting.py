@@ -138,6 +138,7 @@ def sofspa10_pendulum():
     return (q[0], p[0]), (q[1:], p[1:])
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 @pytest.mark.parametrize("solver", SOLVERS, ids=SOLVER_IDS)
 def test_convergence_order_on_driven_pendulum(solver, sofspa10_pendulum):
     step_counts = order_step_counts(solver)
@@ -237,6 +238,7 @@ def halves_of_energy_error(q, p):
     return error[: middle + 1].max(), error[middle:].max()
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_kepler_energy_bounded_for_yoshida4_but_drifts_for_tsit5():
     yoshida = solve(
         separable_terms(kepler_force),

@@ -40,6 +40,7 @@ def _assert_identical(store, expected):
         np.testing.assert_array_equal(store.array(name), expected[name], err_msg=name)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_streamed_chunks_equal_the_in_memory_sweep_and_read_with_numpy(tmp_path):
     system, y0s, omegas = problem()
     store = lj.sweep_to_disk(

@@ -58,6 +58,7 @@ def _jet_coefficients(f, y0, order):
     )
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 @pytest.mark.parametrize("unroll", [pytest.param(True, marks=pytest.mark.slow), False])
 def test_coefficients_match_jet_and_nested_jvp(unroll):
     f = lambda y: double_pendulum(0.0, y, None)
@@ -164,6 +165,7 @@ def double_pendulum_runs():
     return run(Y0, 1e-15, None), run(Y0, 1e-16, 26)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_double_pendulum_to_t_100_reaches_1e_12(double_pendulum_runs):
     solution, reference = double_pendulum_runs
     assert solution.result == RESULTS.successful
@@ -224,6 +226,7 @@ def _final_state(y0, g, forward_mode=False):
     return solution.ys[-1]
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_gradients_match_finite_differences():
     y0, g = jnp.array([1.0, 0.2]), 1.3
     # one compilation for the gradient, one for the finite differences

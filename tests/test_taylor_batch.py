@@ -45,6 +45,7 @@ def _lie_coefficients(f, y0, order):
     return jnp.stack(coefficients)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_scalar_graph_coefficients_of_a_batch_match_the_vector_graph():
     y0s = jnp.array([[0.5, 0.3, 0.1, -0.2], [1.0, -0.4, 0.0, 0.3], [0.1, 0.2, 0, 0]])
     graph, leaves = lower_vector_field(double_pendulum, 0.0, y0s[0], None, scalar=True)

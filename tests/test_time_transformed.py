@@ -124,6 +124,7 @@ def perturbed_kepler() -> lj.SeparableHamiltonian:
     )
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_fourth_order_on_a_precessing_orbit():
     y0, t1 = pericentre_state(0.5), 7.0
     run = lambda splitting, ds: np.asarray(

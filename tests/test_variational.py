@@ -96,6 +96,7 @@ def test_rejects_hamiltonian_system():
         lj.simulate(ham, (1.0, 0.0), dt=0.1, solver=lj.VariationalMidpoint())
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_vmap_matches_loop():
     q0s = jnp.stack([jnp.array([0.5, 0.1]) * k for k in range(1, 5)])
 
