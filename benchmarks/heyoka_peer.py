@@ -174,8 +174,14 @@ def heyoka_rows(case: str, chain: Chain, y0, t1: float, tol: float, exact,
         ),
         row(case, "lagjax->heyoka", tol, first_s, backend, exact),
         # what a user writes: lj.simulate(lag, y0, solver=lj.Taylor(backend="heyoka"))
-        row(case, "simulate(Taylor heyoka)", tol, simulate_first_s, simulate_taylor,
-            exact),  # fmt: skip
+        row(
+            case,
+            "simulate(Taylor heyoka)",
+            tol,
+            simulate_first_s,
+            simulate_taylor,
+            exact,
+        ),
     ]
 
 
