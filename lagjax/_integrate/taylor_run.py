@@ -263,5 +263,5 @@ def as_diffrax_result(result: Any) -> Any:
             diffrax.RESULTS.successful,
             diffrax.RESULTS.max_steps_reached,
         ),
-        diffrax.RESULTS.nonfinite,
+        diffrax.RESULTS.nonfinite,  # pyright: ignore[reportArgumentType]
     )

@@ -37,6 +37,7 @@ import jax
 import jax.lax as lax
 import jax.numpy as jnp
 import numpy as np
+from jax.core import Tracer
 
 from lagjax._core.precision import cast_floats, working_dtype
 from lagjax._integrate.checks.inputs import check_simulate_inputs
@@ -65,13 +66,13 @@ def run_time_transformed(
         raise ValueError(
             f"{solver.name} needs dt, the fictitious step ds (dt/ds = w(−V))"
         )
-    if not isinstance(ds, jax.core.Tracer) and not float(ds) > 0:
+    if not isinstance(ds, Tracer) and not float(ds) > 0:
         raise ValueError(f"the fictitious step ds (dt) must be positive; got {ds}")
     if t1 is None:
         t1 = system.default_span()[0]
     # ds stands in for dt: positive, pointing to t1, resolvable at the times' scale.
     y0 = check_simulate_inputs(system, y0, t0, t1, ds, None, ts, args, max_steps)
-    if not isinstance(t1, jax.core.Tracer) and not float(t1) > float(t0):
+    if not isinstance(t1, Tracer) and not float(t1) > float(t0):
         raise ValueError(f"{solver.name} integrates forward: t1 must exceed t0")
     system, args = system.resolve(args)
     dtype = working_dtype(y0)
@@ -82,9 +83,7 @@ def run_time_transformed(
         raise ValueError(f"{solver.name} needs H = T(p) + V(q): {error}") from None
     y0, args = cast_floats(y0, dtype), cast_floats(args, dtype)
     weight0 = start_weight(solver, integrated, y0, t0, args)
-    if not isinstance(weight0, jax.core.Tracer) and not (
-        np.isfinite(weight0) and weight0 > 0
-    ):
+    if not isinstance(weight0, Tracer) and not (np.isfinite(weight0) and weight0 > 0):
         raise ValueError(
             f"{solver.name}: the weight w(−V) = dt/ds is {float(weight0)} at the "
             "start; it must be positive and finite (the logarithmic Hamiltonian "
@@ -168,7 +167,7 @@ def _compiled_run(system, y0, args, solver, t0, ds, save_ts, max_steps):
             kept = jax.tree_util.tree_map(
                 lambda a, b: jnp.where(done, a, b), carry[:4], moved[:4]
             )
-            return _Carry(*kept, moved.slots), None
+            return _Carry(*kept, moved.slots), None  # pyright: ignore[reportCallIssue]
 
         carry, _ = lax.scan(frozen_step, carry, None, length=max_steps)
     starts = _fill_forward(carry.slots, saves)

@@ -185,6 +185,7 @@ def _integer_power(builder: _Builder, x: int, n: int, aval: Any) -> int:
         n >>= 1
         if n:
             base = builder.primitive("mul", (base, base), aval)
+    assert result is not None  # n ≥ 1: at least one bit set
     return result
 
 

@@ -102,7 +102,7 @@ def resolve_order(rtol: Any, atol: Any, order: int | None) -> int:
             "lagjax.Taylor: with traced rtol/atol, pass order= (the order sets "
             "array shapes, so it must be known when tracing)"
         )
-    return order_from_tolerance(min(tolerances))
+    return order_from_tolerance(min(t for t in tolerances if t is not None))
 
 
 def two_sum(a: jax.Array, b: jax.Array) -> tuple[jax.Array, jax.Array]:
@@ -117,7 +117,7 @@ def _saver(ts: jax.Array, direction: jax.Array) -> Callable:
     (t, t_new] if the step is accepted (`ok`)."""
     if ts.shape[0] <= SMALL_SAVES:
 
-        def save(coeffs, t, t_low, t_new, ys, index, ok):
+        def save(coeffs, t, t_low, t_new, ys, index, ok):  # pyright: ignore[reportRedeclaration]
             inside = ok & (direction * (ts - t) > 0) & (direction * (ts - t_new) <= 0)
             values = horner_many(coeffs, (ts - t) - t_low)
             return jnp.where(inside[:, None], values, ys), index
@@ -126,7 +126,7 @@ def _saver(ts: jax.Array, direction: jax.Array) -> Callable:
 
     last = ts.shape[0] - 1
 
-    def save(coeffs, t, t_low, t_new, ys, index, ok):
+    def save(coeffs, t, t_low, t_new, ys, index, ok):  # pyright: ignore[reportRedeclaration]
         def cond(c):
             i, _ = c
             return (
@@ -219,7 +219,7 @@ def taylor_integrate(
         ),
         index=jnp.sum(at_start),
         num_steps=jnp.array(0),
-        result=RESULTS.successful,
+        result=RESULTS.successful,  # pyright: ignore[reportArgumentType]
     )
     final = eqxi.while_loop(
         cond,
@@ -231,7 +231,7 @@ def taylor_integrate(
     )
     result = RESULTS.where(
         (final.t != t1) & (final.result == RESULTS.successful),
-        RESULTS.max_steps_reached,
+        RESULTS.max_steps_reached,  # pyright: ignore[reportArgumentType]
         final.result,
     )
     return TaylorSolution(
