@@ -29,8 +29,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import statistics
-import time
 from collections.abc import Callable
 
 import diffrax
@@ -38,6 +36,7 @@ import jax
 import numpy as np
 
 import lagjax as lj
+from benchmarks.state_timing import timed
 from lagjax.scenes.pythagorean import PythagoreanThreeBody
 
 COMPARE_AT = 30
@@ -61,18 +60,6 @@ def measures(scene: PythagoreanThreeBody, q: np.ndarray, p: np.ndarray) -> dict:
         escape_energy=float(scene.escape_energy(q[-1], p[-1])),
         receding=bool(np.all(np.diff(distance[-10:]) > 0)),
     )
-
-
-def timed(run: Callable[[], tuple[np.ndarray, np.ndarray]], repeats: int) -> tuple:
-    start = time.perf_counter()
-    q, p = run()
-    first = time.perf_counter() - start
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        q, p = run()
-        times.append(time.perf_counter() - start)
-    return q, p, first, statistics.median(times)
 
 
 def lagjax_run(scene, ts: np.ndarray, solver, **options) -> Callable:

@@ -28,8 +28,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import statistics
-import time
 from collections.abc import Callable
 
 import diffrax
@@ -38,6 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import lagjax as lj
+from benchmarks.state_timing import timed
 
 PERIOD = 2 * np.pi
 BATCH = 1024
@@ -85,18 +84,6 @@ def measures(q: np.ndarray, p: np.ndarray, ts: np.ndarray, e: float) -> dict:
         **conserved_errors(q, p),
         position=float(np.max(np.abs(q - kepler_position(ts, e)))),
     )
-
-
-def timed(run: Callable[[], tuple[np.ndarray, np.ndarray]], repeats: int) -> tuple:
-    start = time.perf_counter()
-    q, p = run()
-    first = time.perf_counter() - start
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        q, p = run()
-        times.append(time.perf_counter() - start)
-    return q, p, first, statistics.median(times)
 
 
 def lagjax_run(e: float, ts: np.ndarray, solver, **options) -> Callable:

@@ -28,14 +28,13 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import statistics
-import time
 from collections.abc import Callable
 
 import jax
 import numpy as np
 
 import lagjax as lj
+from benchmarks.state_timing import timed
 from lagjax._integrate.wisdom_holman_run import run_wisdom_holman
 from lagjax.scenes.planetary import PlanetarySystem
 from lagjax.solvers.wisdom_holman import WisdomHolman
@@ -49,18 +48,6 @@ def energy(q: np.ndarray, p: np.ndarray, masses: np.ndarray, g: float) -> np.nda
     first, second = np.triu_indices(len(masses), 1)
     distances = np.linalg.norm(q[:, first] - q[:, second], axis=-1)
     return kinetic - g * np.sum(masses[first] * masses[second] / distances, -1)
-
-
-def timed(run: SCENE_STATE, repeats: int) -> tuple:
-    start = time.perf_counter()
-    q, p = run()
-    first = time.perf_counter() - start
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        q, p = run()
-        times.append(time.perf_counter() - start)
-    return q, p, first, statistics.median(times)
 
 
 def lagjax_run(scene: PlanetarySystem, ts: np.ndarray, dt: float, solver) -> Callable:
