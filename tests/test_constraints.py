@@ -132,6 +132,7 @@ def test_atwood_scene_follows_the_parabola():
     assert relative_close(jnp.sum(run.q[-1]), scene.rope_length, 1e-15)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_bead_on_rotating_wire_in_cartesian_coordinates():
     scene = CartesianRotatingWireBead()
     fixed = dict(solver=diffrax.Dopri8(), dt=0.005, t1=scene.default_t1)

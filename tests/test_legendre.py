@@ -28,6 +28,7 @@ def relativistic(q, qd, t, args):
     return -mass * c**2 * jnp.sqrt(1.0 - qd @ qd / c**2) - 0.5 * k * q @ q
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 @pytest.mark.parametrize("quadratic", [True, False])
 def test_round_trip_double_pendulum(quadratic):
     lag = lj.Lagrangian(double_pendulum, quadratic_in_velocity=quadratic)

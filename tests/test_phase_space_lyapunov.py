@@ -48,6 +48,7 @@ def test_chaotic_henon_heiles_orbit_has_paired_spectrum_summing_to_zero():
     assert np.max(np.abs(spectrum.running.sum(axis=1))) < 1e-12
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_adaptive_and_fixed_step_spectra_agree_on_a_lagrangian_orbit():
     # The finite-time spectrum belongs to the orbit and the initial basis, not the
     # integrator: Tsit5 (adaptive, differentiated with ForwardMode) and GaussLegendre

@@ -119,6 +119,7 @@ def _knife_edge_on_a_slope():
     )
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_nonholonomic_run_in_float32():
     """The rolling disk's kind of run (velocity constraints, the default constraint
     projection) at a fraction of its compile time: float32 throughout, within

@@ -131,6 +131,7 @@ def _loss(system, solver, dt, steps, adjoint, ts=None):
 LONG_COMPILES = {"BlanesMoan4-plain-sum", "VariationalMidpoint", "RigidBodyYoshida4"}
 
 
+@pytest.mark.integration  # ~45 s of compilations in all: CI's integration step
 @pytest.mark.parametrize(
     "family",
     [

@@ -55,6 +55,7 @@ def cartesian_acceleration(theta, omega, alpha):
 THETA, OMEGA = jnp.array([0.9, -0.4]), jnp.array([1.1, -2.3])
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_cartesian_double_pendulum_matches_the_angle_equations():
     lag = lj.Lagrangian(cartesian_double_pendulum, constraints=rods)
     q, qdot = cartesian_state(THETA, OMEGA)

@@ -97,6 +97,7 @@ def test_orbit_matches_keplers_equation_and_conserves_e_l_and_lenz(form, index):
     assert_checks_pass(scene_at(scenes, index), checks_at(checks, index))
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 @pytest.mark.parametrize("form", FORMS, ids=lambda form: form.__name__)
 def test_orbit_closes_after_one_period(form):
     scenes, trajectories, (positions, velocities), _ = eccentricity_sweep(form)

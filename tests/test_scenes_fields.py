@@ -124,6 +124,7 @@ def test_measured_cyclotron_frequency_is_eb_over_m():
         assert relative_error(gyrofrequency, omega, abs(omega)) < TOLERANCE
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_measured_larmor_radius_is_m_v_perp_over_eb():
     # Pure B: v⊥ = |(1, 0)| = 1, so ρ = m v⊥/(eB) = 1. Crossed fields: v⊥ is taken
     # in the drift frame, v0 − v_E = (1, 0.2, 0), so ρ = √1.04 m/(|e|B).

@@ -248,6 +248,7 @@ def inertial_start(scene):
     return inertial_motion(scene.to_inertial, *scene.initial_state(), 0.0)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_spinning_frame_matches_the_inertial_solution_turned_back():
     scene = SpinningFrameParticle()
     ts = np.linspace(0.0, scene.default_t1, 31)

@@ -71,6 +71,7 @@ def test_sweep_shares_args_and_validates_batch():
         lj.sweep(system, (q0s, jnp.zeros(2)), t1=1.0, dt=0.01, args=2.0)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_batched_trajectory_derives_p_qdot_and_energy():
     # Extra leading (batch) axes on a Trajectory are mapped over, not mistaken for q.
     lag = lj.Lagrangian(lambda q, v: 0.5 * v**2 - 0.5 * q**2)

@@ -69,6 +69,7 @@ def test_kepler_energy_and_orbit_shape_kept_over_100_periods(e, splitting):
     assert float(traj.stats["time_residual"]) <= 1e-12 * ts[-1]
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_timing_follows_keplers_equation():
     """Kahan–Li's eighth order: the time along the exact orbit to 1e-9 after 100
     periods at 126 steps per period (Yoshida4 at the same step: 1e-3)."""

@@ -162,6 +162,7 @@ def two_body(eccentricity=0.6, planet_mass=1e-3):
     return scene, mu
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_one_planet_is_integrated_exactly():
     """No interaction: the map is the exact two-body flow at any step (dt = T/7)."""
     scene, mu = two_body()
