@@ -105,7 +105,8 @@ def test_console_script_entry_point():
 
 
 def test_failed_run_exits_1_with_the_reason(capsys):
-    # Fixed-point stage iteration diverges at dt = 5 s on the double pendulum.
+    # Fixed-point stage iteration diverges at dt = 5 s on the double pendulum (a
+    # run of two steps: a --dt longer than the run is refused before it starts).
     code = main(
         [
             "run",
@@ -113,7 +114,7 @@ def test_failed_run_exits_1_with_the_reason(capsys):
             "--solver",
             "GaussLegendre2",
             "--t1",
-            "1",
+            "10",
             "--dt",
             "5",
         ]
