@@ -155,6 +155,7 @@ def test_evaluate_speaks_the_callers_convention():
     assert np.isclose(qdot, run.p[-1] / mass, rtol=1e-12, atol=1e-12)  # ... not here
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_saveat_dense_and_off_grid_ts_use_the_extension():
     """SaveAt(dense=True) keeps the extension; ts off the grid are read from it."""
     exact = reference("pendulum")

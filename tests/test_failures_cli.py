@@ -127,6 +127,7 @@ def interrupt_after(monkeypatch, chunks: int):
     monkeypatch.setattr(cli_run, "CHUNK_STEPS", 100)  # 1000 steps: 10 chunks
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_ctrl_c_saves_what_was_computed(monkeypatch, tmp_path, capsys):
     interrupt_after(monkeypatch, chunks=3)
     target = tmp_path / "partial.npz"

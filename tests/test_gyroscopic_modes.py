@@ -90,6 +90,7 @@ def test_routh_critical_mass_ratio(side):
         assert relative_close(result.omegas, np.abs(roots.imag)[:2], 1e-8)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_foucault_modes_split_by_the_vertical_earth_rate():
     scene = FoucaultPendulum()
     pendulum = scene.system()
@@ -148,6 +149,7 @@ def test_free_charge_has_a_cyclotron_mode_and_a_neutral_one():
     assert result.labels() == ("marginal", "stable")
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_gyroscopic_terms_are_never_dropped_silently():
     mu = jnp.asarray(0.01)
     q4 = jnp.asarray(l4_closed_form(0.01)[0])

@@ -162,6 +162,7 @@ SYMPLECTIC_SOLVERS += [
 ]
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 @pytest.mark.parametrize(
     "solver", SYMPLECTIC_SOLVERS, ids=["s1", "s2", "s3", "s3-newton"]
 )

@@ -162,6 +162,7 @@ def both_forms(masses, q, p):
     )
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_lagrangian_and_hamiltonian_forms_agree():
     found = jax.tree_util.tree_map(np.asarray, both_forms(*random_cluster(3, seed=3)))
     assert relative_close(found["qdot"], found["velocities"], 1e-15)

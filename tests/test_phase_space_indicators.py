@@ -13,6 +13,7 @@ OSCILLATOR = lj.SeparableHamiltonian(lambda p: 0.5 * p**2, lambda q: 0.5 * q**2)
 OPTIONS = dict(dt=0.05, solver=lj.Yoshida4(), renormalize_every=0.5)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_megno_of_a_libration_approaches_two():
     y0 = (jnp.asarray(2.0), jnp.asarray(0.0))
     early = lj.megno(PENDULUM, y0, 500.0, **OPTIONS)

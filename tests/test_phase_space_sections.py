@@ -35,6 +35,7 @@ def _oscillator_section(direction=+1, max_crossings=5):
     )  # fmt: skip
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_crossings_lie_on_the_invariant_ellipse_at_the_closed_form_times():
     section = _oscillator_section()
     # 7 crossings before t = 40; the first 5 are stored, all are counted.
@@ -66,6 +67,7 @@ def test_both_directions_alternate_and_pad_with_nan():
     assert np.all(np.isnan(both.p[:, 13:]))
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_lagrangian_pendulum_crosses_at_three_quarter_periods():
     # From rest at θ0 the pendulum passes θ = 0 upward at 3T/4 + kT, with
     # T = 4K(sin²(θ0/2)) and momentum √(2(1 − cos θ0)).

@@ -106,6 +106,7 @@ def _refined_extrema(ts, values, kind):
     return np.asarray(ts)[index] + offset * step, sign * peak
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_released_fast_top_nutation_bounds_and_rates():
     scene = HeavySymmetricTop()
     ts, angles, _ = euler_angle_run(scene, jnp.asarray(3.0))

@@ -144,6 +144,7 @@ def _texts(figure) -> list[str]:
     return texts
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_the_foucault_figure_has_named_axes_and_the_plane_against_its_rate():
     scene = scenes.FoucaultPendulum(earth_rate=0.01)
     path = linear_foucault(scene, jnp.linspace(0.0, 150.0, 3001))

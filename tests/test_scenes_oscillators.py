@@ -161,6 +161,7 @@ def test_driven_oscillator_transient_and_steady_state():
     assert np.isclose(lag, np.arctan2(1.5, 4 - 1.5**2), rtol=1e-8, atol=0)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_light_damping_energy_decays_as_exp_minus_gamma_t():
     # Free motion, γ = 0.05 ≪ ω₀ = 2. E e^{γt} has period π/ω_d, so between t = 0
     # and 40 half-periods the average decay rate is exactly γ.

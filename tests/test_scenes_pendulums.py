@@ -178,6 +178,7 @@ def test_double_pendulum_chaotic_run_conserves_energy(t1):
     assert np.max(np.abs(energy - start_energy)) / abs(start_energy[0]) < 1e-10
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_double_pendulum_is_chaotic_at_large_amplitude():
     # Starts 1e-9 rad apart part company within 100 s at large amplitude; at
     # small amplitude (linear, regular) the gap stays at the 1e-9 level.

@@ -72,6 +72,7 @@ def test_step_back_returns_to_start():
     assert np.allclose(q0, q, atol=1e-13) and np.allclose(p0, p, atol=1e-13)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_discrete_noether_and_bounded_energy():
     lag = lj.Lagrangian(central_force_polar, quadratic_in_velocity=True)
     y0 = (jnp.array([0.4, 0.0]), jnp.array([0.0, 5.0]))  # r²θ̇ = 0.8, e ≈ 0.36
