@@ -1,6 +1,7 @@
 """Comparison helpers shared by the tests."""
 
 import contextlib
+import math
 
 import jax
 import jax.numpy as jnp
@@ -69,3 +70,14 @@ def one_error_line(capsys) -> str:
     lines = err.strip().splitlines()
     assert len(lines) == 1, err
     return lines[0]
+
+
+def lie_coefficients(f, y0, order):
+    """Taylor coefficients yₖ = (L_f)ᵏ y / k! of y' = f(y) at y0, by nested
+    `jax.jvp` (autonomous f): the reference the recurrences are checked against."""
+    derivative = lambda y: y
+    coefficients = [y0]
+    for k in range(1, order + 1):
+        derivative = (lambda g: lambda y: jax.jvp(g, (y,), (f(y),))[1])(derivative)
+        coefficients.append(derivative(y0) / math.factorial(k))
+    return jnp.stack(coefficients)

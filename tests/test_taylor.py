@@ -12,6 +12,7 @@ from jax.experimental import jet
 import lagjax as lj
 from lagjax.taylor import RESULTS, Taylor, taylor_coefficients, taylor_integrate
 from lagjax.taylor.step import horner, order_from_tolerance
+from tests.helpers import lie_coefficients
 
 G = 9.81
 
@@ -37,16 +38,6 @@ def pendulum(t, y, args):
 Y0 = jnp.array([0.5, 0.3, 0.1, -0.2])
 
 
-def _lie_coefficients(f, y0, order):
-    """yₖ = (L_f)ᵏ y / k! at y0 by nested jax.jvp (autonomous f)."""
-    derivative = lambda y: y
-    coefficients = [y0]
-    for k in range(1, order + 1):
-        derivative = (lambda g: lambda y: jax.jvp(g, (y,), (f(y),))[1])(derivative)
-        coefficients.append(derivative(y0) / math.factorial(k))
-    return jnp.stack(coefficients)
-
-
 def _jet_coefficients(f, y0, order):
     """The same by jax.experimental.jet, one order at a time."""
     derivatives = [f(y0)]
@@ -68,7 +59,7 @@ def test_coefficients_match_jet_and_nested_jvp(unroll):
     ours = coefficients(Y0)
     # order 6: jet's nested series compile in seconds (order 8 took most of a minute)
     by_jet = jax.jit(lambda y0: _jet_coefficients(f, y0, 6))(Y0)
-    by_jvp = jax.jit(lambda y0: _lie_coefficients(f, y0, 3))(Y0)
+    by_jvp = jax.jit(lambda y0: lie_coefficients(f, y0, 3))(Y0)
     scale = jnp.max(jnp.abs(by_jet), axis=1, keepdims=True)
     assert jnp.max(jnp.abs(ours - by_jet) / scale) < 1e-13
     assert jnp.max(jnp.abs(ours[:4] - by_jvp) / scale[:4]) < 1e-13
@@ -106,7 +97,7 @@ def test_coefficients_of_every_rule_match_nested_jvp():
         return jnp.concatenate([_many_primitives(z[2], z[:2], None), jnp.ones(1)])
 
     z0 = jnp.concatenate([y0, jnp.zeros(1)])
-    reference = jax.jit(lambda z: _lie_coefficients(extended, z, 5))(z0)
+    reference = jax.jit(lambda z: lie_coefficients(extended, z, 5))(z0)
     assert jnp.allclose(ours, reference[:, :2], rtol=1e-12, atol=1e-13)
 
 
@@ -266,7 +257,7 @@ def test_unstack_has_an_affine_rule():
 
     y0 = jnp.array([0.4, 0.1])
     ours = taylor_coefficients(field, 0.0, y0, order=5, unroll=False)
-    reference = _lie_coefficients(lambda y: field(0.0, y, None), y0, 5)
+    reference = lie_coefficients(lambda y: field(0.0, y, None), y0, 5)
     assert jnp.allclose(ours, reference, rtol=1e-13, atol=1e-15)
 
 

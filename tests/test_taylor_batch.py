@@ -3,8 +3,6 @@ coefficients on the tape against nested `jax.jvp` and the vector graph (itself
 checked against `jax.experimental.jet`), each member's result against its own
 one-trajectory run, per-member steps and saves, batched parameters, refusals."""
 
-import math
-
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -14,6 +12,7 @@ import lagjax as lj
 from lagjax.taylor import RESULTS, taylor_integrate
 from lagjax.taylor.batch import taylor_integrate_batch
 from lagjax.taylor.coefficients import graph_coefficients, lower_vector_field
+from tests.helpers import lie_coefficients
 
 G = 9.81
 LAGRANGIAN = lj.Lagrangian(
@@ -33,16 +32,6 @@ def double_pendulum(t, y, args):
 
 def pendulum(t, y, g):
     return jnp.stack([y[1], -g * jnp.sin(y[0])])
-
-
-def _lie_coefficients(f, y0, order):
-    """yₖ = (L_f)ᵏ y / k! at y0 by nested jax.jvp (autonomous f)."""
-    derivative = lambda y: y
-    coefficients = [y0]
-    for k in range(1, order + 1):
-        derivative = (lambda g: lambda y: jax.jvp(g, (y,), (f(y),))[1])(derivative)
-        coefficients.append(derivative(y0) / math.factorial(k))
-    return jnp.stack(coefficients)
 
 
 @pytest.mark.integration  # compile-heavy: CI runs it in its integration step
@@ -100,7 +89,7 @@ def test_every_rule_on_the_tape_matches_nested_jvp():
 
     for member, y0 in enumerate(y0s):
         z0 = jnp.concatenate([y0, jnp.zeros(1)])
-        reference = _lie_coefficients(extended, z0, 5)[:, :2]
+        reference = lie_coefficients(extended, z0, 5)[:, :2]
         np.testing.assert_allclose(ours[..., member], reference, rtol=1e-12, atol=1e-13)
 
 
