@@ -37,6 +37,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from lagjax._core.host_callbacks import MISSING_CPU_MESSAGE, is_missing_cpu_error
 from lagjax.trajectory import Trajectory
 
 
@@ -220,9 +221,13 @@ def failure_reason(error: BaseException) -> str:
 
     Errors raised inside `jit` (`eqx.error_if`, diffrax's `throw=True`) arrive
     wrapped in a long message; the line after "EquinoxRuntimeError:" is the one
-    written for the user. Anything else: its type and first line.
+    written for the user. A host callback that found no CPU device
+    (`JAX_PLATFORMS` without "cpu") gets its remedy. Anything else: its type and
+    first line.
     """
     text = str(error)
+    if is_missing_cpu_error(error):
+        return MISSING_CPU_MESSAGE
     raised = re.findall(r"EquinoxRuntimeError: (.+)", text)
     if raised:
         return raised[-1].strip()

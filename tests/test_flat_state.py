@@ -35,7 +35,11 @@ def test_flat_run_is_the_pair_run():
         lag, y0, saveat=diffrax.SaveAt(ts=ts, fn=lambda t, y, args: y), **options
     )
     assert set(flat.q) == {"theta", "phi"} and flat.q["theta"].shape == (11,)
-    assert int(flat.stats["num_steps"]) == int(pair.stats["num_steps"])
+    steps = int(flat.stats["num_steps"]), int(pair.stats["num_steps"])
+    if jax.default_backend() == "cpu":
+        assert steps[0] == steps[1]
+    else:  # a GPU fuses the two programs differently: 176 against 172 on an H200
+        assert abs(steps[0] - steps[1]) <= 0.05 * steps[1]
     # The same arithmetic, compiled as two programs: with lagjax's CPU loop default
     # (lagjax._core.cpu_loops) XLA rounds them differently, by up to 2.6e-11 here, and
     # both are 4.9e-9 from a reference at rtol 1e-14 (bit-identical without it).

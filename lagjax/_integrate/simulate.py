@@ -44,6 +44,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.core import Tracer
 
+from lagjax._core.host_callbacks import host_callbacks_explained
 from lagjax._core.precision import (
     cast_floats,
     python_floats_as_arrays,
@@ -212,7 +213,8 @@ def simulate(
                    stepsize_controller, progress_meter)  # fmt: skip
     mode = plan.saving_mode()
     check_reversible_run(adjoint, solver, mode.on_step_grid, dt)
-    with forward_mode_explained():  # jax.jacfwd through diffeqsolve: name the adjoint
+    # jax.jacfwd through diffeqsolve: name the adjoint; a missing CPU for callbacks
+    with forward_mode_explained(), host_callbacks_explained():
         trajectory = _compiled_run(
             system, y0, args, solver, plan.for_compiled_call(mode), mode
         )
