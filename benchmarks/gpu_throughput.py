@@ -97,6 +97,10 @@ def main(argv: list[str] | None = None) -> None:
         "--budget", type=float, default=60.0,
         help="skip a route's next size when it would take longer than this (s)",
     )  # fmt: skip
+    parser.add_argument(
+        "--routes", default="taylor-batch,taylor,dopri8,tsit5-fixed",
+        help="comma-separated routes to measure, in order",
+    )  # fmt: skip
     options = parser.parse_args(argv)
     jax.config.update("jax_enable_x64", True)
     sizes = [256, 1024] if options.quick else [10_000, 100_000, 1_000_000]
@@ -104,7 +108,7 @@ def main(argv: list[str] | None = None) -> None:
     reference = route("taylor-ref")
     print(f"{'route':>11} {'members':>9} {'first s':>8} {'run s':>8} "
           f"{'members/s':>11} {'max |Δθ| (64)':>14}")  # fmt: skip
-    for name in ("taylor-batch", "taylor", "dopri8", "tsit5-fixed"):
+    for name in options.routes.split(","):
         compile_s, seconds_per_member = 0.0, 0.0  # from the last size measured
         for members in sizes:
             # Compilation does not grow with the batch, and a GPU's run time grows
