@@ -44,6 +44,7 @@ Wanner, *Geometric Numerical Integration*, 2nd ed. (2006), §V.1; diffrax issue
 
 from __future__ import annotations
 
+import itertools
 from typing import Any, NamedTuple
 
 import diffrax
@@ -52,6 +53,7 @@ import jax
 import jax.numpy as jnp
 
 from lagjax._integrate.reversible_splitting import SplittingWalk
+from lagjax._integrate.reversible_steps import repeat_steps
 from lagjax._integrate.scan_body import (
     TrackingCarry,
     all_finite,
@@ -83,11 +85,34 @@ class Clock(NamedTuple):
 
 class Marks(NamedTuple):
     """Where the forward run keeps its state: after `lead` steps, then every
-    `every` steps, `count` marks in all."""
+    `every` steps, `count` marks in all; or, when `gaps` is given (irregular
+    marks, `Marks.at`), `gaps[i]` steps between marks i and i + 1."""
 
     lead: int
     every: int
     count: int
+    gaps: tuple[int, ...] | None = None
+
+    @classmethod
+    def at(cls, positions) -> Marks:
+        """The marks after `positions[i]` steps (increasing): uniform when evenly
+        spaced (the unrolled loops), irregular otherwise."""
+        positions = [int(k) for k in positions]
+        gaps = tuple(b - a for a, b in itertools.pairwise(positions))
+        if len(set(gaps)) <= 1:
+            return cls(positions[0], gaps[0] if gaps else 1, len(positions))
+        return cls(positions[0], 0, len(positions), gaps)
+
+    def positions(self) -> list[int]:
+        """The step count at each mark."""
+        if self.gaps is None:
+            return [self.lead + i * self.every for i in range(self.count)]
+        return [self.lead + sum(self.gaps[:i]) for i in range(self.count)]
+
+    def stretches(self) -> Any:
+        """The lengths of the stretches between marks as the loops take them: one
+        Python int for uniform marks, an array for irregular ones."""
+        return self.every if self.gaps is None else jnp.asarray(self.gaps)
 
 
 def _stacked(first: Any, later: Any) -> Any:
@@ -106,9 +131,11 @@ def _forward(y0, terms, args, solver, clock: Clock, marks: Marks):
     k0 = jnp.asarray(0)
     carry = TrackingCarry(y0, state0, diffrax.RESULTS.successful, k0, None, k0)
 
+    def one(carry):
+        return fast_step(carry, None)[0]
+
     def steps(carry, length):
-        unroll = steps_per_trip(solver)
-        return jax.lax.scan(fast_step, carry, None, length=length, unroll=unroll)[0]
+        return repeat_steps(one, carry, length, steps_per_trip(solver))
 
     if marks.lead:
         carry = steps(carry, marks.lead)
@@ -116,22 +143,25 @@ def _forward(y0, terms, args, solver, clock: Clock, marks: Marks):
     def kept(carry: TrackingCarry):
         return carry.y, carry.solver_state, carry.result
 
-    def interval(carry, _):
-        carry = steps(carry, marks.every)
+    def interval(carry, gap):
+        carry = steps(carry, marks.every if gap is None else gap)
         return carry, kept(carry)
 
-    _, later = jax.lax.scan(interval, carry, None, length=marks.count - 1)
+    gaps = None if marks.gaps is None else jnp.asarray(marks.gaps)
+    _, later = jax.lax.scan(interval, carry, gaps, length=marks.count - 1)
     return _stacked(kept(carry), later)
 
 
 @eqx.filter_custom_vjp
 def reversible_run(differentiable, solver, clock: Clock, marks: Marks):
-    """`(states, results)` at the marks of a fixed-step run from `y0`;
-    `differentiable = (y0, terms, args)`. Reverse mode recomputes the states
-    backward (module docstring)."""
+    """`(states, results, solver_states)` at the marks of a fixed-step run from
+    `y0`; `differentiable = (y0, terms, args)`. Reverse mode recomputes the states
+    backward (module docstring); the solver states are returned for their values
+    only (a continuous extension started at a mark): their cotangents are
+    dropped."""
     y0, terms, args = differentiable
-    states, _, results = _forward(y0, terms, args, solver, clock, marks)
-    return states, results
+    states, solver_states, results = _forward(y0, terms, args, solver, clock, marks)
+    return states, results, solver_states
 
 
 @reversible_run.def_fwd
@@ -139,7 +169,7 @@ def _reversible_run_fwd(perturbed, differentiable, solver, clock, marks):
     del perturbed
     y0, terms, args = differentiable
     states, solver_states, results = _forward(y0, terms, args, solver, clock, marks)
-    return (states, results), (states, solver_states)
+    return (states, results, solver_states), (states, solver_states)
 
 
 @reversible_run.def_bwd
@@ -158,21 +188,22 @@ def _reversible_run_bwd(residuals, cotangents, perturbed, differentiable, solver
     def at(index, tree):
         return jax.tree_util.tree_map(lambda x: x[index], tree)
 
-    last_step = marks.lead + (marks.count - 1) * marks.every
+    positions = marks.positions()
     carry = walk.start(at(-1, state_cotangents), at(-1, states),
-                       at(-1, solver_states), params, last_step)  # fmt: skip
+                       at(-1, solver_states), params, positions[-1])  # fmt: skip
 
     def interval(carry, inputs):
-        y, state, lower_cotangent, mark = inputs
-        end = marks.lead + mark * marks.every
-        carry = walk.back(carry, y, state, end, marks.every, params, lower_cotangent)
+        y, state, lower_cotangent, end, gap = inputs
+        length = marks.every if gap is None else gap
+        carry = walk.back(carry, y, state, end, length, params, lower_cotangent)
         return carry, None
 
     later = (
         at(slice(1, None), states),
         at(slice(1, None), solver_states),
         at(slice(None, -1), state_cotangents),
-        jnp.arange(1, marks.count),
+        jnp.asarray(positions[1:], dtype=int),
+        None if marks.gaps is None else marks.stretches(),
     )
     carry, _ = jax.lax.scan(interval, carry, later, reverse=True)
     if marks.lead:
@@ -208,7 +239,7 @@ class _GenericWalk(eqx.Module):
         del y, steps
         return _Backward(cotangent, _zeros(state), _zeros(params))
 
-    def back(self, carry: Any, y, state, end, length: int, params,
+    def back(self, carry: Any, y, state, end, length: Any, params,
              saved) -> _Backward:  # fmt: skip
         carry = _steps_back(carry, y, state, end, length, params, self.static,
                             self.solver, self.clock)  # fmt: skip
@@ -230,7 +261,7 @@ def _steps_back(carry: _Backward, y, state, end, length, params, static, solver,
         y1, _, _, state1, _ = solver.step(terms, start, stop, y, args, state, False)
         return y1, state1
 
-    def one_back(inner, _):
+    def one_back(inner):
         y, state, k, cotangent = inner
         start, stop = clock.times(k - 1)
         y, state = step(y, state, params, (stop, start))
@@ -239,16 +270,13 @@ def _steps_back(carry: _Backward, y, state, end, length, params, static, solver,
         )
         y_bar, state_bar, params_bar = pullback((cotangent.y, cotangent.state))
         cotangent = _Backward(y_bar, state_bar, _add(cotangent.params, params_bar))
-        return (y, state, k - 1, cotangent), None
+        return y, state, k - 1, cotangent
 
     inner = (y, state, jnp.asarray(end), carry)
     # Unrolled as the forward loop is (`steps_per_trip`): Störmer–Verlet's short
     # step pays the loop's own cost per trip, not per step.
-    unroll = steps_per_trip(solver)
-    (_, _, _, carry), _ = jax.lax.scan(
-        one_back, inner, None, length=length, unroll=unroll
-    )
-    return carry
+    inner = repeat_steps(one_back, inner, length, steps_per_trip(solver))
+    return inner[-1]
 
 
 def _through_init(carry: _Backward, y0, params, static, solver, clock: Clock):

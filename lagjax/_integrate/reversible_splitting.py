@@ -41,6 +41,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from lagjax._integrate.reversible_steps import repeat_steps
 from lagjax._integrate.scan_body import steps_per_trip
 from lagjax.solvers.compensated import compensated_add
 from lagjax.solvers.splitting import AbstractSplittingSolver
@@ -133,7 +134,7 @@ class SplittingWalk(eqx.Module):
         q_inc, params_inc = pullback(self._kick_cotangent(params, force, last, p_bar))
         return zero.plus(q_inc, _zeros(p_bar), params_inc)
 
-    def back(self, cotangent: Any, y, state, end, length: int, params,
+    def back(self, cotangent: Any, y, state, end, length: Any, params,
              saved) -> SplittingCotangent:  # fmt: skip
         """Walk back `length` steps from `(y, state)` after step `end` − 1; the
         cotangent `saved = (q̄, p̄)` of the state reached enters there (None: no
@@ -141,17 +142,16 @@ class SplittingWalk(eqx.Module):
         low = end - length
         saved = _zeros(y) if saved is None else saved
 
-        def one_back(carry, _):
+        def one_back(carry):
             y, state, k, cotangent = carry
             y, state, cotangent = self._step_back(
                 y, state, k - 1, cotangent, params, saved, k - 1 == low
             )
-            return (y, state, k - 1, cotangent), None
+            return y, state, k - 1, cotangent
 
-        # Unrolled as the forward loop is.
-        unroll = steps_per_trip(self.solver)
+        # Unrolled as the forward loop is (a traced length: not unrolled).
         carry = (y, state, jnp.asarray(end), cotangent)
-        carry, _ = jax.lax.scan(one_back, carry, None, length=length, unroll=unroll)
+        carry = repeat_steps(one_back, carry, length, steps_per_trip(self.solver))
         return carry[-1]
 
     def finish(self, cotangent: Any, params):

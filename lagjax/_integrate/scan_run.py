@@ -21,6 +21,7 @@ from lagjax._integrate.fixed_step_loop import (
     integrate_fixed_steps,
     integrate_fixed_steps_saving,
 )
+from lagjax._integrate.off_grid_saves import integrate_off_grid
 from lagjax._integrate.plan import RunPlan, Saving
 from lagjax._integrate.reversible_adjoint import ReversibleAdjoint
 from lagjax._integrate.scan_saving import integrate_saving
@@ -38,16 +39,17 @@ def integrate_on_scans(terms, solver, state0, args, run: RunPlan, mode: Saving):
     """
     step = grid_step(run.t0, run.t1, run.dt, run.dtype)
     interpolation = None
-    fixed_steps, fixed_steps_saving = (
-        (run.adjoint.fixed_steps, run.adjoint.fixed_steps_saving)
+    fixed_steps, fixed_steps_saving, off_grid = (
+        (run.adjoint.fixed_steps, run.adjoint.fixed_steps_saving,
+         run.adjoint.off_grid_saves)
         if isinstance(run.adjoint, ReversibleAdjoint)
-        else (integrate_fixed_steps, integrate_fixed_steps_saving)
-    )
+        else (integrate_fixed_steps, integrate_fixed_steps_saving, integrate_off_grid)
+    )  # fmt: skip
     if mode is Saving.BETWEEN_STEPS:
         plan = run.saving()
         assert plan is not None  # saving_mode() checked it
         saved_ts, ys, result, steps, interpolation = integrate_saving(
-            terms, solver, state0, args, plan, run.t0, run.t1, run.dtype
+            terms, solver, state0, args, plan, run.t0, run.t1, run.dtype, off_grid
         )
     elif mode is Saving.FINAL_STATE:
         y1, result, steps = fixed_steps(

@@ -111,8 +111,11 @@ def scan_saving(
     return ScanSaving(step, sub.t0, times, sub.steps, sub.t1, dense, limit, schedule)
 
 
-def integrate_saving(terms, solver, state0, args, plan: ScanSaving, t0, t1, dtype):
-    """Run the scans of `plan`: `(saved_ts, ys, result, steps_taken, interpolation)`."""
+def integrate_saving(terms, solver, state0, args, plan: ScanSaving, t0, t1, dtype,
+                     off_grid=integrate_off_grid):  # fmt: skip
+    """Run the scans of `plan`: `(saved_ts, ys, result, steps_taken, interpolation)`;
+    `off_grid` saves `ts` off the step grid (`ReversibleAdjoint.off_grid_saves`
+    under that adjoint)."""
     step, direction = plan.step, 1 if t1 > t0 else -1
     parts = []  # (times, states, saved) in diffeqsolve's order
     if plan.t0:
@@ -148,7 +151,7 @@ def integrate_saving(terms, solver, state0, args, plan: ScanSaving, t0, t1, dtyp
     elif plan.ts is not None:
         assert plan.schedule is not None
         times = jnp.asarray(plan.ts, dtype)
-        values, result, taken, saved = integrate_off_grid(
+        values, result, taken, saved = off_grid(
             terms, solver, with_dense_output(solver, terms), t0, t1, step,
             plan.schedule[0], plan.schedule[1], times, state0, args, dtype,
         )  # fmt: skip

@@ -1,0 +1,128 @@
+"""ReversibleAdjoint with save times between steps, and its checkpoint budget.
+
+Off-grid saves are the continuous extension over the step each time falls in;
+their cotangents enter the backward walk at that step. The oracles: the plain
+scan's gradient (which stores every step and differentiates the same
+interpolation) to round-off, and central finite differences of the run itself.
+The checkpoint budget is checked as arithmetic (its spacing) and by its effect:
+marks at the spacing it picks, the gradient unchanged.
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import lagjax as lj
+from lagjax._integrate.reversible_adjoint import ROUND_OFF_SPACING, _marks
+from lagjax._integrate.reversible_off_grid import off_grid_marks
+
+
+def _kepler():
+    def potential(q, t, mu):
+        return -mu / jnp.sqrt(jnp.sum(q**2))
+
+    system = lj.SeparableHamiltonian(lambda p: 0.5 * jnp.sum(p**2), potential)
+    y0 = (jnp.array([1.0, 0.0]), jnp.array([0.0, 1.2]))
+    return system, y0, jnp.asarray(1.0)
+
+
+def _relative_gap(a, b) -> float:
+    a, b = jax.tree_util.tree_leaves(a), jax.tree_util.tree_leaves(b)
+    scale = max(float(jnp.max(jnp.abs(x))) for x in b)
+    return max(float(jnp.max(jnp.abs(x - y))) for x, y in zip(a, b)) / scale
+
+
+# Unevenly spaced, none on the grid of dt = 0.01; two in one step (4.2031, 4.2077)
+# and one in the first step.
+OFF_GRID_TS = np.array([0.004, 1.2345, 2.5, 4.2031, 4.2077, 7.77777, 9.9951])
+
+
+def _off_grid_loss(adjoint, solver=None, steps=1000):
+    system, _, _ = _kepler()
+
+    def loss(y0, mu):
+        run = lj.simulate(system, y0, t1=steps * 0.01, dt=0.01, ts=OFF_GRID_TS,
+                          solver=solver or lj.Yoshida4(), args=mu, adjoint=adjoint)  # fmt: skip
+        weights = jnp.linspace(0.5, 1.5, OFF_GRID_TS.size)
+        return jnp.sum(weights * jnp.sin(run.ys[0][:, 0])) + 0.3 * jnp.sum(
+            run.ys[1] ** 2
+        )
+
+    return loss
+
+
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
+def test_off_grid_saves_agree_with_the_plain_scan():
+    _, y0, mu = _kepler()
+    expected = jax.grad(_off_grid_loss(None), argnums=(0, 1))(y0, mu)
+    # Checkpoints every 100 steps as well: marks at the brackets and between.
+    for adjoint in (lj.ReversibleAdjoint(), lj.ReversibleAdjoint(checkpoints=100)):
+        actual = jax.grad(_off_grid_loss(adjoint), argnums=(0, 1))(y0, mu)
+        assert _relative_gap(actual, expected) < 1e-12
+
+
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
+def test_off_grid_saves_are_the_plain_scans_and_match_finite_differences():
+    _, y0, mu = _kepler()
+    system = _kepler()[0]
+    runs = [
+        lj.simulate(
+            system,
+            y0,
+            t1=10.0,
+            dt=0.01,
+            ts=OFF_GRID_TS,
+            solver=lj.StormerVerlet(),
+            args=mu,
+            adjoint=adjoint,
+        )
+        for adjoint in (None, lj.ReversibleAdjoint())
+    ]
+    assert _relative_gap(runs[1].ys, runs[0].ys) < 1e-14
+    loss = _off_grid_loss(lj.ReversibleAdjoint(), lj.StormerVerlet())
+    derivative = jax.grad(loss, argnums=1)(y0, mu)
+    eps = 1e-6
+    difference = (loss(y0, mu + eps) - loss(y0, mu - eps)) / (2 * eps)
+    assert abs(float(derivative - difference)) < 1e-7 * abs(float(derivative))
+
+
+def test_dense_output_is_refused_with_the_reason():
+    system, y0, mu = _kepler()
+    with pytest.raises(ValueError, match="dense output"):
+        lj.simulate(system, y0, t1=1.0, dt=0.01, dense=True, solver=lj.Yoshida4(),
+                    args=mu, adjoint=lj.ReversibleAdjoint())  # fmt: skip
+
+
+def test_checkpoint_budget_spacing():
+    adjoint = lj.ReversibleAdjoint()  # 1 MiB
+    # Kepler, Yoshida4: state 32 B, compensation 32 B, force 16 B.
+    assert adjoint.spacing(10**3, 80) is None  # the whole run: no checkpoints
+    assert adjoint.spacing(10**6, 80) == ROUND_OFF_SPACING  # round-off floor
+    assert adjoint.spacing(10**8, 80) == 7630  # the budget: ⌈10⁸·80 / 2²⁰⌉
+    assert lj.ReversibleAdjoint(checkpoint_bytes=0).spacing(10**8, 80) is None
+    assert lj.ReversibleAdjoint(checkpoints=7).spacing(10**3, 80) == 7
+    with pytest.raises(ValueError, match="checkpoint_bytes"):
+        lj.ReversibleAdjoint(checkpoint_bytes=-1)
+
+
+def test_marks_keep_the_saves_and_space_the_checkpoints():
+    # Saves every 1200 steps from 300: a divisor of 1200 near 1000 keeps the
+    # marks uniform (600: within 2× of the spacing).
+    saves = [300 + 1200 * i for i in range(5)]
+    uniform = _marks(saves, 1000)
+    assert uniform.gaps is None and uniform.every == 600
+    assert set(saves) <= set(uniform.positions())
+    # Saves every 1009 steps (a prime): no good divisor, marks irregular.
+    saves = [1009 * i for i in range(1, 4)]
+    irregular = _marks(saves, 1000)
+    positions = irregular.positions()
+    assert irregular.gaps is not None and set(saves) <= set(positions)
+    assert max(np.diff(positions)) <= 1000
+    assert list(off_grid_marks(np.array([5, 5, 2500]), 1000)) == [
+        0,
+        5,
+        1000,
+        2000,
+        2500,
+    ]
