@@ -61,7 +61,7 @@ def test_running_out_of_steps_is_one_clear_error():
     "options, named",
     [
         ({"dt": 0.1}, "dt"),
-        ({"dense": True}, "dense"),
+        ({"stepsize_controller": diffrax.PIDController(1e-6, 1e-6)}, "stepsize"),
         ({"adjoint": diffrax.ForwardMode()}, "adjoint"),
     ],
 )

@@ -18,6 +18,11 @@ What works under transformations:
   `forward_mode=True` (a plain `lax.while_loop`: the checkpointed loop is a
   `custom_vjp`, which forward mode cannot enter), for any number of saves.
 
+Two things a run reads off its step polynomials besides the saves, each paid for
+only when asked for: terminal events (`event`, `lagjax.taylor.events`: the
+conditions sampled on every step, the crossing located on the step that crossed)
+and dense output (`dense`, `lagjax.taylor.dense`: every step's polynomial kept).
+
 The step length is a control decision, not part of the solution, so it is held
 out of differentiation (`stop_gradient`); derivatives are those of the step
 polynomials, which agree with the exact solution's to the tolerance.
@@ -39,6 +44,8 @@ import jax
 import jax.numpy as jnp
 
 from .coefficients import graph_coefficients, lower_vector_field
+from .dense import DenseBuffer, TaylorDense, empty_buffer, keep_step
+from .events import StepEvent, Watch, first_crossing, start_watch, watch_step
 from .step import horner, horner_many, order_from_tolerance, step_size
 
 # Up to this many save times, every step fills them by one masked evaluation
@@ -58,13 +65,20 @@ class RESULTS(diffrax.RESULTS):  # pyright: ignore[reportGeneralTypeIssues]
 
 class TaylorSolution(eqx.Module):
     """`ys[i]` is the state at `ts[i]` (NaN where the run stopped before it);
-    `num_steps` counts accepted steps; `result` is a `RESULTS` code."""
+    `num_steps` counts accepted steps; `result` is a `RESULTS` code.
+
+    With an `event`: `event_mask` says which condition ended the run
+    (`RESULTS.event_occurred`); the saves after the event are t = inf, y = inf,
+    and without `ts` the one save is the state at the event. With `dense=True`:
+    `dense.evaluate(t)` is the state at any t of the run."""
 
     ts: jax.Array
     ys: jax.Array
     num_steps: jax.Array
     result: RESULTS
     order: int = eqx.field(static=True)
+    event_mask: jax.Array | None = None
+    dense: TaylorDense | None = None
 
 
 class _Carry(NamedTuple):
@@ -75,6 +89,8 @@ class _Carry(NamedTuple):
     index: jax.Array  # the next save time to fill (inner-loop saving)
     num_steps: jax.Array
     result: RESULTS
+    watch: Watch | None = None  # with an event
+    dense: DenseBuffer | None = None  # with dense output
 
 
 def check_tolerance(name: str, value: Any) -> float | None:
@@ -157,6 +173,8 @@ def taylor_integrate(
     max_steps: int = 1_000_000,
     forward_mode: bool = False,
     unroll: bool = False,
+    event: StepEvent | None = None,
+    dense: bool = False,
 ) -> TaylorSolution:
     """Integrate y' = vector_field(t, y, args) from (t0, y0) to t1 by Taylor's
     method; y0 a flat float array. Returns the states at `ts` (default: [t1]),
@@ -165,7 +183,11 @@ def taylor_integrate(
     `forward_mode=True` runs a plain `lax.while_loop`, which `jax.jvp` /
     `jax.jacfwd` can enter; the default is equinox's checkpointed loop, which
     `jax.grad` can enter. `unroll` chooses the sweep over the orders (see
-    `coefficients`; unrolled compiles far longer).
+    `coefficients`; unrolled compiles far longer). `event` (a `StepEvent` on the
+    flat state) ends the run where one of its conditions crosses zero
+    (`lagjax.taylor.events`); `dense=True` keeps every step's polynomial in a
+    buffer of `max_steps` rows (`lagjax.taylor.dense`). Neither costs anything
+    per step when not asked for.
     """
     p = resolve_order(rtol, atol, order)
     y0 = jnp.asarray(y0)
@@ -174,6 +196,7 @@ def taylor_integrate(
             f"lagjax.Taylor: y0 must be a flat float array, got {y0.shape} {y0.dtype}"
         )
     t0, t1 = jnp.asarray(t0, y0.dtype), jnp.asarray(t1, y0.dtype)
+    final_only = ts is None
     ts = jnp.atleast_1d(jnp.asarray(t1 if ts is None else ts, y0.dtype))
     graph, leaves = lower_vector_field(vector_field, t0, y0, args)
     direction = jnp.where(t1 >= t0, 1.0, -1.0).astype(y0.dtype)
@@ -202,10 +225,17 @@ def taylor_integrate(
             index=index,
             num_steps=c.num_steps + ok,
             result=RESULTS.where(ok, c.result, RESULTS.non_finite),
+            watch=None
+            if event is None or c.watch is None
+            else watch_step(event, c.watch, coeffs, c.t, c.t_low, tau, args, ok),
+            dense=None
+            if c.dense is None
+            else keep_step(c.dense, c.num_steps, c.t, c.t_low, coeffs),
         )
 
     def cond(c: _Carry) -> jax.Array:
-        return (c.t != t1) & (c.result == RESULTS.successful)
+        going = (c.t != t1) & (c.result == RESULTS.successful)
+        return going if c.watch is None else going & ~jnp.any(c.watch.fired)
 
     at_start = direction * (ts - t0) <= 0
     init = _Carry(
@@ -220,6 +250,10 @@ def taylor_integrate(
         index=jnp.sum(at_start),
         num_steps=jnp.array(0),
         result=RESULTS.successful,  # pyright: ignore[reportArgumentType]
+        watch=None
+        if event is None
+        else start_watch(event, vector_field, t0, y0, args, p),
+        dense=empty_buffer(max_steps, p, y0, direction) if dense else None,
     )
     final = eqxi.while_loop(
         cond,
@@ -227,13 +261,88 @@ def taylor_integrate(
         init,
         max_steps=max_steps,
         kind="lax" if forward_mode else "checkpointed",
-        buffers=None if ts.shape[0] <= SMALL_SAVES else (lambda c: c.ys),
+        buffers=_buffers(ts.shape[0] > SMALL_SAVES, dense),
     )
+    stopped = (final.t != t1) & (final.result == RESULTS.successful)
+    if final.watch is not None:  # an event ends a run early, successfully
+        stopped = stopped & ~jnp.any(final.watch.fired)
     result = RESULTS.where(
-        (final.t != t1) & (final.result == RESULTS.successful),
+        stopped,
         RESULTS.max_steps_reached,  # pyright: ignore[reportArgumentType]
         final.result,
     )
-    return TaylorSolution(
+    solution = TaylorSolution(
         ts=ts, ys=final.ys, num_steps=final.num_steps, result=result, order=p
     )
+    end = t1
+    if event is not None:
+        assert final.watch is not None
+        solution, end = _end_at_event(
+            solution, event, final.watch, args, direction, final_only
+        )
+    if final.dense is not None:
+        solution = _with_dense(solution, final, t0, t1, end, direction)
+    return solution
+
+
+def _with_dense(
+    solution: TaylorSolution, final: _Carry, t0, t1, event_time, direction
+) -> TaylorSolution:
+    """The kept polynomials, over [t0, where the run ended: t1, the event, or
+    the last good step]."""
+    assert final.dense is not None
+    result = solution.result
+    end = jnp.where(result == RESULTS.successful, t1, final.t)
+    end = jnp.where(result == RESULTS.event_occurred, event_time, end)
+    return eqx.tree_at(
+        lambda s: s.dense,
+        solution,
+        TaylorDense(final.dense, final.num_steps, t0, end, direction),
+        is_leaf=lambda x: x is None,
+    )
+
+
+def _buffers(many_saves: bool, dense: bool) -> Callable | None:
+    """The carry's arrays written one row per step, for the checkpointed loop."""
+    if not (many_saves or dense):
+        return None
+    return lambda c: tuple(
+        ([c.ys] if many_saves else []) + (list(c.dense) if dense else [])
+    )
+
+
+def _end_at_event(
+    solution: TaylorSolution,
+    event: StepEvent,
+    watch: Watch,
+    args: Any,
+    direction: jax.Array,
+    final_only: bool,
+) -> tuple[TaylorSolution, jax.Array]:
+    """The run ended by an event: its time and state located on the last step's
+    polynomial, the saves after it marked inf (diffrax's convention), or, with no
+    save times asked for, the one save moved to the event. Also the event time."""
+    crossing = first_crossing(event, watch, args, direction)
+    t_event = watch.t + (watch.t_low + crossing.tau)
+    y_event = horner(watch.coeffs, crossing.tau)
+    occurred = crossing.occurred & (solution.result == RESULTS.successful)
+    ts, ys = solution.ts, solution.ys
+    if final_only:
+        ts = jnp.where(occurred, t_event, ts)
+        ys = jnp.where(occurred, y_event, ys)
+    else:
+        after = occurred & (direction * (ts - t_event) > 0)
+        ts = jnp.where(after, jnp.inf, ts)
+        ys = jnp.where(after[:, None], jnp.inf, ys)
+    result = RESULTS.where(
+        occurred,
+        RESULTS.event_occurred,  # pyright: ignore[reportArgumentType]
+        solution.result,
+    )
+    solution = eqx.tree_at(
+        lambda s: (s.ts, s.ys, s.result, s.event_mask),
+        solution,
+        (ts, ys, result, crossing.mask & occurred),
+        is_leaf=lambda x: x is None,
+    )
+    return solution, t_event
