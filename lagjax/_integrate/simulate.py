@@ -66,7 +66,6 @@ from lagjax._integrate.reversible_adjoint import (
     check_reversible_run,
 )
 from lagjax._integrate.scan_run import integrate_on_scans
-from lagjax._integrate.geometric_choice import geometric_default
 from lagjax._integrate.solver_choice import chosen_solver
 from lagjax._integrate.step_control import (
     as_python_number,
@@ -164,12 +163,6 @@ def simulate(
     check_save_choice(ts, saveat)  # before the Taylor and time-transformed routes
     rtol = DEFAULT_TOLERANCE if rtol is None else rtol
     atol = DEFAULT_TOLERANCE if atol is None else atol
-    options = (saveat, adjoint, dense, event, stepsize_controller, progress_meter)
-    if tolerance_run and dt is None and max_steps is None and not progress and all(
-        option is None or option is False for option in options
-    ):  # a gravitating two-body system may run in fictitious time instead
-        geometric = geometric_default(system, y0, t0, args, rtol)
-        solver, dt = geometric if geometric is not None else (None, None)
     if isinstance(solver, Taylor):  # Taylor series of the derived equations
         return run_taylor(system, y0, t0, t1, dt, solver, ts, args, rtol, atol,
                           max_steps, throw, saveat=saveat, adjoint=adjoint,
