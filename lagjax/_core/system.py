@@ -19,6 +19,7 @@ shooting code call nothing else:
 | the span and step of a run that names none | `default_span()` |
 | can the phase-space tools take it? | `phase_space_obstacle()` |
 | is the energy conserved when autonomous? (divergence checks) | `conserves_energy_if_autonomous()` |
+| is it a gravitating separable H (a time-transformed method may suit)? | `gravitation(args)` |
 
 The integrated state is the user's `y0` convention or the canonical one: a
 `Lagrangian` integrated by a symplectic method runs on (q, p) of its Legendre
@@ -40,6 +41,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from lagjax._core.gravitation import Gravitation
 from lagjax._core.solver_kinds import DefaultMethod
 from lagjax._core.solver_kinds import is_partitioned as is_partitioned
 from lagjax._core.system_protocols import LagrangianLike
@@ -150,6 +152,14 @@ class AbstractSystem(eqx.Module):
     def default_span(self) -> tuple[float, float | None]:
         """`(t1, dt)` of a run that names neither (dt None: adaptive)."""
         return DEFAULT_T1, None
+
+    def gravitation(self, args: Any) -> Gravitation | None:
+        """For a separable H = T(p) + V(q) with V < 0 attractive and vanishing at
+        infinity, its bodies and dynamical time (`Gravitation`); None otherwise.
+        A tolerance run may then pick a time-transformed method
+        (`lagjax._integrate.geometric_choice`)."""
+        del args
+        return None
 
     def phase_space_obstacle(self) -> str | None:
         """Why the phase-space tools (Lyapunov spectra, sections, indicators) cannot

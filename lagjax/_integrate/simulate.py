@@ -60,6 +60,7 @@ from lagjax._integrate.checks.traced_save_times import checked_traced_save_times
 from lagjax._integrate.dense_output import DenseSolution, UserState, event_in_user_state
 from lagjax._integrate.diffeqsolve_run import integrate_with_diffeqsolve
 from lagjax._integrate.flat_state import flattened
+from lagjax._integrate.geometric_choice import geometric_default
 from lagjax._integrate.plan import RunPlan, Saving
 from lagjax._integrate.reversible_adjoint import (
     ReversibleAdjoint,
@@ -163,6 +164,19 @@ def simulate(
     check_save_choice(ts, saveat)  # before the Taylor and time-transformed routes
     rtol = DEFAULT_TOLERANCE if rtol is None else rtol
     atol = DEFAULT_TOLERANCE if atol is None else atol
+    options = (saveat, adjoint, event, stepsize_controller, progress_meter)
+    if (
+        tolerance_run
+        and dt is None
+        and max_steps is None
+        and not (progress or dense)
+        and all(option is None for option in options)
+    ):  # a gravitating two-body system may run in fictitious time instead
+        geometric = geometric_default(system, y0, t0, t1, args, rtol)
+        if geometric is not None:
+            time_transformed, ds = geometric
+            return run_time_transformed(system, y0, t0, t1, ds, time_transformed,
+                                        ts, args, max_steps, throw)  # fmt: skip
     if isinstance(solver, Taylor):  # Taylor series of the derived equations
         return run_taylor(system, y0, t0, t1, dt, solver, ts, args, rtol, atol,
                           max_steps, throw, saveat=saveat, adjoint=adjoint,

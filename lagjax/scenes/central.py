@@ -24,12 +24,13 @@ angular momentum in a central field).
 from __future__ import annotations
 
 import abc
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from lagjax._core.gravitation import Gravitation
 from lagjax.mechanics.hamiltonian import SeparableHamiltonian
 from lagjax.mechanics.lagrangian import Lagrangian
 from lagjax.scenes.base import (
@@ -218,6 +219,12 @@ class KeplerCartesian(AbstractKeplerProblem):
 
     def system(self) -> SeparableHamiltonian:
         return SeparableHamiltonian(_cartesian_kinetic, _cartesian_potential)
+
+    def gravitation(self, args: Any) -> Gravitation:
+        """Two bodies (the centre and the particle); τ = √(a³/μ)."""
+        scene = self if args is None else args
+        axis, pull = scene.semi_major_axis, scene.gravitational_parameter
+        return Gravitation(bodies=2, dynamical_time=jnp.sqrt(axis**3 / pull))
 
     def initial_state(self) -> tuple[jax.Array, jax.Array]:
         zero = jnp.zeros_like(self.eccentricity)

@@ -29,6 +29,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from lagjax._core.gravitation import Gravitation
 from lagjax.mechanics.hamiltonian import SeparableHamiltonian
 from lagjax.scenes.base import AbstractScene, StateKind, concrete, parameter
 
@@ -119,6 +120,16 @@ class PlanetarySystem(AbstractScene):
 
     def system(self) -> SeparableHamiltonian:
         return SeparableHamiltonian(_kinetic, _potential, quadratic_in_momentum=True)
+
+    def gravitation(self, args: Any) -> Gravitation:
+        """N bodies; τ = √(a³/G(m₀ + mᵢ)) of the innermost two-body orbit about
+        body 0 (vis-viva: 1/a = 2/r − v²/G(m₀ + mᵢ))."""
+        scene = self if args is None else args
+        pull = scene.gravitational_constant * (scene.masses[0] + scene.masses[1:])
+        distance = jnp.linalg.norm(scene.positions[1:] - scene.positions[0], axis=-1)
+        speed = scene.velocities[1:] - scene.velocities[0]
+        axis = 1 / (2 / distance - jnp.sum(speed**2, axis=-1) / pull)
+        return Gravitation(scene.masses.shape[-1], jnp.min(jnp.sqrt(axis**3 / pull)))
 
     def initial_state(self) -> tuple[jax.Array, jax.Array]:
         return self.positions, self.masses[:, None] * self.velocities
