@@ -1,24 +1,32 @@
 """The targets of sweeps that outgrow one machine (issue 31), measured in one run.
 
-The workload: Hénon–Heiles orbits (`lagjax.phase_space.henon_heiles`), one member
-per start (q, p) drawn uniformly in [−0.25, 0.25]⁴, integrated by the default
-splitting (Yoshida4, dt = 0.01) to t1, the final state kept. `lj.sweep` runs
-`simulate` per member, so these are plain simulate members, not MEGNO ones (a
-MEGNO member is a tangent-map integration that `lj.megno` runs outside `lj.sweep`);
-the per-member work is the same kind. Every timing excludes start-up and
-compilation (each process runs a warm-up chunk through the same compiled program
-first), and every process is pinned to one core (`taskset`, or
-`os.sched_setaffinity` where taskset is missing).
-
-1. **Strong scaling**: `lj.sweep_to_disk` of the same members by 2 processes × 1
-   core (JAX's distributed runtime, coordinator on localhost) against 1 process ×
-   1 core. Target ≥ 1.8×. The two stores must be equal bit for bit.
+1. **Strong scaling** on MEGNO members: ⟨Y⟩ of 10⁵ Hénon–Heiles orbits
+   (`lj.sweep_to_disk(..., measure=lj.megno)`, Yoshida4 at dt = 0.05, renormalised
+   every 0.5, to t1 = 100; quick mode 8192 orbits to t1 = 10), one start (q, p) per
+   member drawn uniformly in [−0.25, 0.25]⁴ (all bound: E < 1/6), by 2 processes ×
+   1 core (JAX's distributed runtime, coordinator on localhost) against 1 process ×
+   1 core. Target ≥ 1.8×. Each configuration runs in fresh worker processes pinned
+   to cores 0 (and 1), which report their breakdown: Python and JAX start-up,
+   `jax.distributed.initialize`, the first sweep (to a scratch directory) and the
+   compile time inside it (JAX's own monitoring events), the timed second sweep
+   through the compiled program, this process's chunks through the same program
+   with nothing written (integration alone), and the gather the in-memory
+   `lj.sweep` does of their results. The headline ratio is the second sweep's;
+   the integration-alone and end-to-end (process start to the first sweep's end)
+   ratios come with it. The chunk size divides the members evenly among the
+   processes (32 chunks of 3125). The two stores must be equal bit for bit.
 2. **Streaming overhead**: `lj.sweep_to_disk` against the in-memory `lj.sweep`,
-   same members and chunks, best of 3 each. Target ≤ 10 %.
-3. **Bounded memory and throughput**: a sweep of 10⁶ members (full mode) streamed
-   to disk in a fresh process: its peak RSS against the RSS before the sweep and
-   the size of what it wrote; its time per member against `jax.jit(jax.vmap(
-   simulate))` over all members at once, in the same process. Target: within 10 %.
+   same members and chunks, best of 3 each, plain `simulate` members (Hénon–Heiles,
+   default splitting Yoshida4 at dt = 0.01, final state kept). Target ≤ 10 %.
+3. **Bounded memory and throughput**: a sweep of 10⁶ such members (full mode)
+   streamed to disk in a fresh process: its peak RSS against the RSS before the
+   sweep and the size of what it wrote; its time per member against `jax.jit(
+   jax.vmap(simulate))` over all members at once, in the same process. Target:
+   within 10 %.
+
+Every timing but the end-to-end one excludes start-up and compilation, and every
+process is pinned to one core (`taskset`, or `os.sched_setaffinity` where taskset
+is missing), the workers to distinct physical cores (not two hyperthreads of one).
 
     python -m benchmarks.sweep_scaling [--quick] [--out DIR]
 
@@ -44,12 +52,15 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 DT = 0.01
-FULL = dict(scaling=100_000, scaling_t1=10.0, streaming=50_000, streaming_t1=10.0,
-            memory=1_000_000)  # fmt: skip
-QUICK = dict(scaling=8192, scaling_t1=2.0, streaming=8192, streaming_t1=1.0,
-             memory=20_000)  # fmt: skip
+FULL = dict(scaling=100_000, scaling_t1=100.0, scaling_chunk=3125, streaming=50_000,
+            streaming_t1=10.0, memory=1_000_000)  # fmt: skip
+QUICK = dict(scaling=8192, scaling_t1=10.0, scaling_chunk=1024, streaming=8192,
+             streaming_t1=1.0, memory=20_000)  # fmt: skip
 MEMORY_T1 = 1.0
 CHUNK = 4096
+# MEGNO members as benchmarks/phase_space.py maps them; ⟨Y⟩ above 4 counts as chaotic.
+MEGNO = dict(dt=0.05, renormalize_every=0.5)
+CHAOTIC_MEGNO = 4.0
 
 
 def starts(members: int) -> tuple[np.ndarray, np.ndarray]:
@@ -137,56 +148,138 @@ def streaming(members: int, t1: float, scratch: Path) -> dict:
     }
 
 
-# -- 1. strong scaling -------------------------------------------------------------
+# -- 1. strong scaling: MEGNO members, one worker process per configuration -------
 
 
-def _pinned(core: int, command: list[str]) -> list[str]:
-    core %= os.cpu_count() or 1
+def _physical_cores() -> list[int]:
+    """One logical CPU per physical core, in order: two workers on the two
+    hyperthreads of one core would share its execution units."""
+    chosen, seen = [], set()
+    for cpu in range(os.cpu_count() or 1):  # not this process's affinity: core 0
+        topology = Path(f"/sys/devices/system/cpu/cpu{cpu}/topology")
+        try:
+            core = tuple((topology / name).read_text().strip()
+                         for name in ("physical_package_id", "core_id"))  # fmt: skip
+        except OSError:
+            core = (str(cpu),)
+        if core not in seen:
+            seen.add(core)
+            chosen.append(cpu)
+    return chosen or [0]
+
+
+def _pinned(worker: int, command: list[str]) -> list[str]:
+    cores = _physical_cores()
+    core = cores[worker % len(cores)]
     return (
         ["taskset", "-c", str(core), *command] if shutil.which("taskset") else command
     )
 
 
-def scaling_worker(port: str, index: str, count: str, members: str, t1: str, out: str):
-    if not shutil.which("taskset"):
-        os.sched_setaffinity(0, {int(index) % (os.cpu_count() or 1)})
+class _CompileClock:
+    """Seconds JAX spends tracing, lowering and compiling (its own monitoring
+    events), summed from when it is made."""
+
+    EVENTS = ("/jax/core/compile/jaxpr_trace_duration",
+              "/jax/core/compile/jaxpr_to_mlir_module_duration",
+              "/jax/core/compile/backend_compile_duration")  # fmt: skip
+
+    def __init__(self):
+        import jax.monitoring
+
+        self.seconds = 0.0
+        jax.monitoring.register_event_duration_secs_listener(self._heard)
+
+    def _heard(self, event: str, duration: float, **_) -> None:
+        if event in self.EVENTS:
+            self.seconds += duration
+
+
+def _megno_sweep(members: int, t1: float, chunk: int, out: Path) -> None:
+    import lagjax as lj
+    from lagjax.phase_space.henon_heiles import henon_heiles
+
+    lj.sweep_to_disk(henon_heiles(), starts(members), out_dir=out, chunk_size=chunk,
+                     measure=lj.megno, t1=t1, **MEGNO)  # fmt: skip
+
+
+def _integration_only(members: int, t1: float, chunk: int) -> dict:
+    """The parts of a sweep, timed one by one in this process: its checks (one
+    member traced, `chunked_run`), this process's chunks through the compiled
+    program with nothing written (integration), and the in-memory sweep's gather
+    of their results across the processes."""
     import jax
 
-    jax.distributed.initialize(
-        f"127.0.0.1:{port}", num_processes=int(count), process_id=int(index)
-    )
+    import lagjax as lj
+    from lagjax._sweep.processes import chunks_of_this_process, gather_chunks
+    from lagjax.phase_space.henon_heiles import henon_heiles
+    from lagjax.sweep import chunk_results, chunked_run
+
+    start = time.perf_counter()
+    chunks = chunked_run(henon_heiles(), starts(members), None, chunk, None,
+                         dict(t1=t1, **MEGNO), lj.megno)  # fmt: skip
+    figures = {"checks_s": time.perf_counter() - start}
+    mine = chunks_of_this_process(chunks.count)
+    start = time.perf_counter()
+    pieces = list(chunk_results(chunks, mine))  # one at a time, as the sweeps run
+    figures["integration_s"] = time.perf_counter() - start
+    start = time.perf_counter()
+    if jax.process_count() > 1:
+        gather_chunks(pieces, mine, chunks.count, chunks.step, chunks.size)
+    figures["gather_s"] = time.perf_counter() - start
+    figures["chunks"] = len(mine)
+    figures["members"] = sum(min(chunks.step, members - i * chunks.step) for i in mine)
+    return figures
+
+
+def scaling_worker(launched: str, port: str, index: str, count: str, members: str,
+                   t1: str, chunk: str, out: str) -> None:  # fmt: skip
+    """One process of the scaling row: start-up, the first (compiling) sweep, a
+    second sweep through the compiled program, and its integration alone."""
+    # Python's start and the imports of jax and lagjax (benchmarks/__init__.py).
+    clock = {"startup_s": time.time() - float(launched)}
+    if not shutil.which("taskset"):
+        cores = _physical_cores()
+        os.sched_setaffinity(0, {cores[int(index) % len(cores)]})
+    n, t1_, size = int(members), float(t1), int(chunk)
+    import jax
+
+    began = time.perf_counter()
+    if int(count) > 1:
+        jax.distributed.initialize(
+            f"127.0.0.1:{port}", num_processes=int(count), process_id=int(index)
+        )
+    clock["distributed_initialize_s"] = time.perf_counter() - began
     _start_jax()
     from lagjax._sweep.processes import wait_for_all_processes
 
-    _warm(int(members), float(t1), Path(out + "-warm"), chunks=int(count))
-    wait_for_all_processes("benchmark start")
-    print(f"SECONDS {_to_disk(int(members), float(t1), Path(out)):.6f}", flush=True)
+    compiling = _CompileClock()
+    began = time.perf_counter()
+    _megno_sweep(n, t1_, size, Path(out + "-cold"))
+    clock["first_sweep_s"] = time.perf_counter() - began
+    clock["compile_s"] = compiling.seconds
+    clock["end_to_end_s"] = time.time() - float(launched)
+    wait_for_all_processes("benchmark: second sweep")
+    began = time.perf_counter()
+    _megno_sweep(n, t1_, size, Path(out))
+    clock["sweep_s"] = time.perf_counter() - began
+    wait_for_all_processes("benchmark: integration alone")
+    clock.update(_integration_only(n, t1_, size))
+    print("FIGURES " + json.dumps(clock), flush=True)
 
 
-def scaling(members: int, t1: float, scratch: Path) -> dict:
-    """2 pinned processes against this one (pinned to core 0)."""
-    import lagjax as lj
-
-    _warm(members, t1, scratch / "warm-one")
-    one = _to_disk(members, t1, scratch / "one")
+def _workers(count: int, members: int, t1: float, chunk: int, out: Path) -> list:
+    """Run `count` pinned worker processes (cores 0, 1, …); their figures."""
     with socket.socket() as probe:
         probe.bind(("127.0.0.1", 0))
         port = str(probe.getsockname()[1])
     env = dict(os.environ, JAX_PLATFORMS="cpu", PYTHONPATH=str(ROOT))
     worker = [sys.executable, "-m", "benchmarks.sweep_scaling", "--scaling-worker"]
+    options = [str(members), str(t1), str(chunk), str(out)]
     runs = [
         subprocess.Popen(
             _pinned(
-                k,
-                [
-                    *worker,
-                    port,
-                    str(k),
-                    "2",
-                    str(members),
-                    str(t1),
-                    str(scratch / "two"),
-                ],
+                k, [*worker, f"{time.time():.6f}", port, str(k), str(count), *options]
             ),
             cwd=ROOT,
             env=env,
@@ -194,45 +287,46 @@ def scaling(members: int, t1: float, scratch: Path) -> dict:
             stderr=subprocess.PIPE,
             text=True,
         )
-        for k in range(2)
+        for k in range(count)
     ]
     outputs = [run.communicate(timeout=3600) for run in runs]
-    seconds = [
-        float(line.split()[1])
+    figures = [
+        json.loads(line.removeprefix("FIGURES "))
         for output, _ in outputs
         for line in output.splitlines()
-        if line.startswith("SECONDS")
+        if line.startswith("FIGURES ")
     ]
-    if len(seconds) != 2:
+    if len(figures) != count:
         raise RuntimeError("a scaling worker failed:\n" + outputs[0][1][-3000:])
-    two = max(seconds)
+    return figures
+
+
+def scaling(members: int, t1: float, chunk: int, scratch: Path) -> dict:
+    """1 pinned worker process against 2 (pinned to cores 0 and 1)."""
+    import lagjax as lj
+
+    one = _workers(1, members, t1, chunk, scratch / "one")[0]
+    two = _workers(2, members, t1, chunk, scratch / "two")
     a, b = lj.open_sweep(scratch / "one"), lj.open_sweep(scratch / "two")
-    identical = all(np.array_equal(a.array(f), b.array(f)) for f in ("q", "p", "ts"))
+    values = a.array("value")
+
+    def slowest(name):
+        return max(worker[name] for worker in two)
+
     return {
         "members": members,
         "t1": t1,
-        "one_process_s": one,
-        "two_processes_s": two,
-        "speed_up": one / two,
-        "bit_identical": bool(identical),
+        "chunk_size": chunk,
+        "one_process": one,
+        "two_processes": two,
+        "speed_up": one["sweep_s"] / slowest("sweep_s"),
+        "speed_up_integration": one["integration_s"] / slowest("integration_s"),
+        "speed_up_end_to_end": one["end_to_end_s"] / slowest("end_to_end_s"),
+        "bit_identical": bool(np.array_equal(values, b.array("value"))),
         "failed": int(np.count_nonzero(a.failed())),
-        "energy_drift": _energy_drift(a, members),
+        "chaotic_share": float(np.mean(values > CHAOTIC_MEGNO)),
+        "median_megno": float(np.median(values)),
     }
-
-
-def _energy_drift(store, members: int) -> float:
-    """max |H(final) − H(start)| over the members that stayed bound (E < 1/6)."""
-    from lagjax.phase_space.henon_heiles import ESCAPE_ENERGY
-
-    def energy(q, p):
-        x, y = q[:, 0], q[:, 1]
-        return 0.5 * (p**2).sum(1) + 0.5 * (x**2 + y**2) + x**2 * y - y**3 / 3
-
-    q0, p0 = starts(members)
-    before = energy(q0, p0)
-    after = energy(store.array("q")[:, -1], store.array("p")[:, -1])
-    bound = before < ESCAPE_ENERGY
-    return float(np.max(np.abs(after - before)[bound]))
 
 
 # -- 3. bounded memory and throughput (a fresh process) ----------------------------
@@ -292,19 +386,46 @@ def memory(members: int, scratch: Path) -> dict:
     return json.loads(lines[0].removeprefix("FIGURES "))
 
 
-def report(figures: dict) -> None:
-    s, t, m = figures["scaling"], figures["streaming"], figures["memory"]
-    print(
-        f"scaling    {s['members']} members to t1 = {s['t1']:g}: 1 process × 1 core "
-        f"{s['one_process_s']:.2f} s, 2 × 1 core {s['two_processes_s']:.2f} s: "
-        f"{s['speed_up']:.2f}× (target ≥ 1.8×); bit-identical: {s['bit_identical']}"
+def _breakdown(label: str, w: dict) -> str:
+    return (
+        f"  {label:<13} start-up {w['startup_s']:.2f} s (Python, imports) + "
+        f"distributed init {w['distributed_initialize_s']:.2f} s; first sweep "
+        f"{w['first_sweep_s']:.2f} s of which compile {w['compile_s']:.2f} s; "
+        f"second sweep {w['sweep_s']:.2f} s = integration {w['integration_s']:.2f} s "
+        f"({w['chunks']} chunks, {w['members']} members) + checks "
+        f"{w['checks_s']:.2f} s + writing and waiting "
+        f"{w['sweep_s'] - w['integration_s'] - w['checks_s']:.2f} s; gather "
+        f"{w['gather_s']:.3f} s"
     )
+
+
+def report_scaling(s: dict) -> None:
+    one, two = s["one_process"], s["two_processes"]
+    print(
+        f"scaling    {s['members']} MEGNO members to t1 = {s['t1']:g} in chunks of "
+        f"{s['chunk_size']}: 1 process × 1 core {one['sweep_s']:.2f} s, 2 × 1 core "
+        f"{max(w['sweep_s'] for w in two):.2f} s: {s['speed_up']:.2f}× (target "
+        f"≥ 1.8×); integration alone {s['speed_up_integration']:.2f}×; end to end "
+        f"(process start, compile, first sweep) {s['speed_up_end_to_end']:.2f}×; "
+        f"bit-identical: {s['bit_identical']}; ⟨Y⟩ > {CHAOTIC_MEGNO:g}: "
+        f"{100 * s['chaotic_share']:.1f} %, {s['failed']} failed"
+    )
+    print(_breakdown("1 process", one))
+    for k, worker in enumerate(two):
+        print(_breakdown(f"2: process {k}", worker), flush=True)
+
+
+def report_streaming(t: dict) -> None:
     print(
         f"streaming  {t['members']} members to t1 = {t['t1']:g}: in memory "
         f"{t['in_memory_s']:.3f} s, to disk {t['to_disk_s']:.3f} s: "
         f"{100 * t['overhead']:+.1f} % (target ≤ 10 %), "
-        f"{t['overhead_ms_per_chunk']:.1f} ms per chunk of {CHUNK}"
+        f"{t['overhead_ms_per_chunk']:.1f} ms per chunk of {CHUNK}",
+        flush=True,
     )
+
+
+def report_memory(m: dict) -> None:
     print(
         f"memory     {m['members']} members: peak RSS {m['peak_rss_sweep_mb']:.0f} MB "
         f"(before the sweep {m['rss_before_sweep_mb']:.0f} MB; inputs "
@@ -330,16 +451,19 @@ def main() -> None:
     # This process runs the one-process figures: one core, like each worker.
     os.sched_setaffinity(0, {0})
     _start_jax()
+    figures = {"mode": "quick" if options.quick else "full"}
+    # Each row is printed as soon as it is measured.
     with tempfile.TemporaryDirectory() as scratch:
-        figures = {
-            "mode": "quick" if options.quick else "full",
-            "scaling": scaling(sizes["scaling"], sizes["scaling_t1"], Path(scratch)),
-            "streaming": streaming(
-                sizes["streaming"], sizes["streaming_t1"], Path(scratch)
-            ),
-            "memory": memory(sizes["memory"], Path(scratch)),
-        }
-    report(figures)
+        figures["scaling"] = scaling(
+            sizes["scaling"], sizes["scaling_t1"], sizes["scaling_chunk"], Path(scratch)
+        )
+        report_scaling(figures["scaling"])
+        figures["streaming"] = streaming(
+            sizes["streaming"], sizes["streaming_t1"], Path(scratch)
+        )
+        report_streaming(figures["streaming"])
+        figures["memory"] = memory(sizes["memory"], Path(scratch))
+        report_memory(figures["memory"])
     if options.out is not None:
         options.out.mkdir(parents=True, exist_ok=True)
         (options.out / "sweep_scaling.json").write_text(json.dumps(figures, indent=1))

@@ -1,4 +1,5 @@
-"""`sweep`: one `simulate` call over a batch of initial states and parameters, sharded.
+"""`sweep`: one `simulate` call — or any per-member measure, such as `lj.megno` — over
+a batch of initial states and parameters, sharded.
 
 The batch (leading axis of `y0s` and of `args_batch`) is split over all devices with
 `jax.sharding` — a one-axis `Mesh` and a `NamedSharding` over it — so the same call
@@ -9,17 +10,24 @@ count is padded (with copies of its last member) and the padding dropped from th
 result. Large batches are processed in chunks of `chunk_size`, so memory stays
 bounded by one chunk; `lj.sweep_to_disk` streams the chunks to a directory.
 
+What runs per member is `measure(system, y0, args=…, **kwargs)`: `simulate` by
+default, or a function with the same calling convention that returns a pytree of
+arrays (`lj.megno`, `lj.chaos_indicators`, or the caller's own). Everything else —
+chunks, devices, processes, the disk store, resume, progress — is the same for
+both.
+
 Refused by name before anything is compiled: a batch of 0 members, a leaf without
 a batch axis, batch inputs of different leading sizes, a chunk size that is not a
-positive integer, an empty, foreign or repeated device list, and inputs whose
-shapes do not fit the system (one member's `simulate` is traced, not run, first).
+positive integer, an empty, foreign or repeated device list, a measure that is
+not a function, and inputs whose shapes do not fit the system (one member's
+`simulate` or measure is traced, not run, first).
 """
 
 from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any, NamedTuple
 
 import equinox as eqx
@@ -35,7 +43,6 @@ from lagjax._sweep.processes import (
     chunks_of_this_process,
     gather_chunks,
 )
-from lagjax.trajectory import Trajectory
 
 _AXIS = "batch"
 
@@ -137,39 +144,44 @@ def _first_member(tree: Any) -> Any:
     return jax.tree_util.tree_map(lambda leaf: leaf[0], tree)
 
 
-@eqx.filter_jit
-def _simulate_members(system, shared_args, simulate_kwargs, members):
-    """vmap of `simulate` over (y0, args) members — or, for `lj.Taylor()`, the
-    batch-native Taylor loop (`lagjax._integrate.taylor_members`); compiled once
-    per configuration (the system, solver and options are hashable Modules and
-    numbers)."""
+def check_measure(measure: Any) -> None:
+    if not callable(measure):
+        raise TypeError(
+            f"measure must be a function called as measure(system, y0, args=…, "
+            f"**kwargs), got {measure!r}: e.g. measure=lj.megno with t1=…, dt=…, "
+            "or leave it out to run lj.simulate"
+        )
 
-    if runs_on_taylor_batch(simulate_kwargs):  # one order, a step per member
-        return taylor_members(system, shared_args, simulate_kwargs, members)
+
+@eqx.filter_jit
+def _measure_members(system, shared_args, measure, kwargs, members):
+    """vmap of `measure` (default `simulate`) over (y0, args) members — or, for
+    `simulate` with `lj.Taylor()`, the batch-native Taylor loop
+    (`lagjax._integrate.taylor_members`); compiled once per configuration (the
+    system, the measure, the solver and options are hashable Modules, functions
+    and numbers)."""
+
+    if measure is simulate and runs_on_taylor_batch(kwargs):  # a step per member
+        return taylor_members(system, shared_args, kwargs, members)
 
     def one(member):
         y0, args = member
-        return simulate(
-            system, y0, args=shared_args if args is None else args, **simulate_kwargs
-        )
+        return measure(system, y0, args=shared_args if args is None else args, **kwargs)
 
     return jax.vmap(one)(members)
 
 
 def _check_a_member_runs(
-    system: System, shared_args: Any, simulate_kwargs: dict[str, Any], member: Any
-) -> None:
-    """Trace one member's `simulate` (no compilation, no integration), so that
+    system: System, shared_args: Any, measure: Callable, kwargs: dict, member: Any
+) -> Any:
+    """Trace one member's `measure` (no compilation, no integration), so that
     inputs whose shapes do not fit the system are refused before any chunk runs
-    and before a directory is touched."""
+    and before a directory is touched. Returns the shapes of its result."""
     y0, args = member
     try:
-        jax.eval_shape(
-            lambda y0, args: simulate(
-                system,
-                y0,
-                args=shared_args if args is None else args,
-                **simulate_kwargs,
+        return jax.eval_shape(
+            lambda y0, args: measure(
+                system, y0, args=shared_args if args is None else args, **kwargs
             ),
             y0,
             args,
@@ -190,7 +202,8 @@ class ChunkedRun(NamedTuple):
     size: int
     step: int
     count: int
-    run: Callable[[int], Trajectory]  # chunk index -> its members' trajectories
+    run: Callable[[int], Any]  # chunk index -> its members' results (dispatched)
+    member_shapes: Any  # one member's result, as jax.ShapeDtypeStruct leaves
 
 
 def chunked_run(
@@ -199,35 +212,56 @@ def chunked_run(
     args_batch: Any,
     chunk_size: int | None,
     devices: Sequence[Any] | None,
-    simulate_kwargs: dict[str, Any],
+    kwargs: dict[str, Any],
+    measure: Callable[..., Any] = simulate,
 ) -> ChunkedRun:
-    """Check the batch and prepare the chunks of a sweep over this process's
-    `devices` (default: its local devices)."""
+    """Check the batch and prepare the chunks of a sweep of `measure` over this
+    process's `devices` (default: its local devices)."""
+    check_measure(measure)
     check_chunk_size(chunk_size)
     devices = checked_devices(devices)
-    simulate_kwargs = dict(simulate_kwargs)
-    shared_args = simulate_kwargs.pop("args", None)
+    kwargs = dict(kwargs)
+    shared_args = kwargs.pop("args", None)
     batched = (y0s, args_batch)
     size = batch_size(y0s, args_batch)
-    _check_a_member_runs(system, shared_args, simulate_kwargs, _first_member(batched))
+    first = _first_member(batched)
+    member_shapes = _check_a_member_runs(system, shared_args, measure, kwargs, first)
     step = len(devices) * math.ceil((chunk_size or size) / len(devices))
     mesh = Mesh(np.array(devices), (_AXIS,))
     sharding = NamedSharding(mesh, PartitionSpec(_AXIS))
-    simulate_members = functools.partial(
-        _simulate_members, system, shared_args, simulate_kwargs
+    measure_members = functools.partial(
+        _measure_members, system, shared_args, measure, kwargs
     )
 
-    def run(index: int) -> Trajectory:
+    def run(index: int) -> Any:
         start = index * step
         stop = min(start + step, size)
         # Padded to a full chunk, so every chunk runs the one compiled program;
         # the computation follows its input's sharding: one piece per device.
         padded = _pad(_take(batched, start, stop), step)
-        return _take(
-            simulate_members(jax.device_put(padded, sharding)), 0, stop - start
-        )
+        return _take(measure_members(jax.device_put(padded, sharding)), 0, stop - start)
 
-    return ChunkedRun(size, step, math.ceil(size / step), run)
+    return ChunkedRun(size, step, math.ceil(size / step), run, member_shapes)
+
+
+def chunk_results(chunks: ChunkedRun, indices: Sequence[int]) -> Iterator[Any]:
+    """The results of the chunks `indices`, in order, each complete, with the next
+    chunk already dispatched when one is handed over — so that what the caller does
+    with it (copy to the host, write to disk) overlaps the next chunk's integration.
+
+    The next chunk is dispatched only once the current one is done, so one chunk
+    runs at a time and memory holds two chunks' results at most (the in-memory
+    sweep keeps them all, of course).
+    """
+    indices = list(indices)
+    current = chunks.run(indices[0]) if indices else None
+    for position in range(len(indices)):
+        jax.block_until_ready(current)
+        following = None
+        if position + 1 < len(indices):
+            following = chunks.run(indices[position + 1])
+        yield current
+        current = following
 
 
 def sweep(
@@ -235,20 +269,26 @@ def sweep(
     y0s: Any,
     args_batch: Any = None,
     *,
+    measure: Callable[..., Any] = simulate,
     chunk_size: int | None = None,
     devices: Sequence[Any] | None = None,
-    **simulate_kwargs: Any,
-) -> Trajectory:
-    """`simulate` for every member of a batch, sharded over `devices`.
+    **kwargs: Any,
+) -> Any:
+    """`simulate` (or `measure`) for every member of a batch, sharded over `devices`.
 
     **Arguments:**
     - `y0s`: initial states with a leading batch axis on every leaf.
     - `args_batch`: parameters with the same leading axis, or None to share
-      `simulate_kwargs["args"]` across the batch.
+      `kwargs["args"]` across the batch.
+    - `measure`: what runs per member, called as `measure(system, y0, args=…,
+      **kwargs)`; default `lj.simulate`. Any function of one orbit with that calling
+      convention that returns a pytree of arrays: `measure=lj.megno, t1=1000.0,
+      dt=0.05` maps MEGNO ⟨Y⟩ over the batch. A function defined anew for every
+      call (a lambda inside a loop) is compiled anew every call.
     - `chunk_size`: at most this many members at a time (rounded up to a multiple of
       the device count); default: the whole batch at once.
     - `devices`: default `jax.local_devices()` (this process's devices).
-    - `simulate_kwargs`: passed to `simulate` (t1, dt, solver, ts, …).
+    - `kwargs`: passed to `measure` (for `simulate`: t1, dt, solver, ts, …).
 
     After `jax.distributed.initialize()` (several processes, one program each), every
     process runs every `jax.process_count()`-th chunk on its own devices and the
@@ -256,15 +296,17 @@ def sweep(
     one-process run with the same chunk size and devices per process
     (`lagjax._sweep.processes`). `lj.sweep_to_disk` writes the chunks instead.
 
-    **Returns:** one `Trajectory` whose arrays have a leading batch axis. Results
-    equal `jax.vmap` of `simulate` over the batch up to rounding (XLA compiles the
-    per-device batch separately and may vectorize it differently: ≤ 2 ulp measured).
+    **Returns:** one `Trajectory` whose arrays have a leading batch axis (or the
+    measure's pytree, every leaf with a leading batch axis). Results equal
+    `jax.vmap` of `simulate` (or of `measure`) over the batch up to rounding (XLA
+    compiles the per-device batch separately and may vectorize it differently:
+    ≤ 2 ulp measured).
     """
-    chunks = chunked_run(system, y0s, args_batch, chunk_size, devices, simulate_kwargs)
+    chunks = chunked_run(system, y0s, args_batch, chunk_size, devices, kwargs, measure)
     if jax.process_count() > 1:
         check_a_chunk_for_every_process(chunks.count)
     mine = chunks_of_this_process(chunks.count)
-    pieces = [chunks.run(index) for index in mine]
+    pieces = list(chunk_results(chunks, mine))
     if jax.process_count() > 1:
         return gather_chunks(pieces, mine, chunks.count, chunks.step, chunks.size)
     if len(pieces) == 1:

@@ -290,9 +290,11 @@ def test_float32_runs_stay_float32_and_near_float64(results):
 def test_sweep_targets_are_measured_and_the_results_agree(results):
     figures = json.loads((results / "sweep_scaling.json").read_text())
     scaling = figures["scaling"]
-    # Two processes write what one writes, bit for bit; the orbits keep their energy.
+    # Two processes write what one writes, bit for bit. The MEGNO members start
+    # below E = 0.15 (< 1/6: bound), where Hénon–Heiles orbits are almost all
+    # regular: ⟨Y⟩ ≤ 2 + small, far from the chaotic ⟨Y⟩ > 4.
     assert scaling["bit_identical"] and scaling["failed"] == 0
-    assert scaling["energy_drift"] < 1e-8
+    assert scaling["chaotic_share"] < 0.05 and scaling["median_megno"] < 2.5
     assert scaling["speed_up"] > 0 and figures["streaming"]["to_disk_s"] > 0
     memory = figures["memory"]
     assert memory["peak_rss_sweep_mb"] >= memory["rss_before_sweep_mb"] > 0

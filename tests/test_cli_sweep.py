@@ -120,6 +120,9 @@ BAD = [
     (["double-pendulum", "--saves", "1"], "--saves must be at least 2"),
     (["double-pendulum", "--solver", "Euler9"], "unknown solver"),
     (["double-pendulum", "--processes", "2"], "go together"),
+    (["double-pendulum", "--measure", "fli"], "unknown measure 'fli'"),
+    (["double-pendulum", "--measure", "megno", "--saves", "3"],
+     "--saves keeps states"),
 ]  # fmt: skip
 
 
@@ -176,3 +179,22 @@ def test_failing_members_are_marked_and_counted(tmp_path, capsys):
     store = lj.open_sweep(out)
     assert store.failed().tolist() == [True, False, False]
     assert np.all(np.isfinite(store.array("q")[1:]))
+
+
+# A MEGNO compilation: CI's second step.
+@pytest.mark.integration
+def test_a_megno_map_of_pendulum_librations(tmp_path, capsys):
+    out = tmp_path / "megno"
+    argv = ["sweep", "simple-pendulum", "--out", str(out), "--measure", "megno",
+            "--q0", "0.5,1,2", "--t1", "200", "--dt", "0.05", "--quiet"]  # fmt: skip
+    assert main(argv) == 0
+    assert "measure lagjax.phase_space.indicators.megno in field value" in (
+        capsys.readouterr().out
+    )
+    store = lj.open_sweep(out)
+    assert sorted(store.fields) == ["finite", "value"] and not store.failed().any()
+    megno = store.array("value")
+    # Librations are quasi-periodic: ⟨Y⟩ → 2 from below as 2 − O(ln t / t). The
+    # smallest is nearly isochronous (little shear), so the furthest from 2.
+    assert np.all((megno > 1.2) & (megno < 2.05))
+    assert np.argmax(np.abs(megno - 2)) == 0

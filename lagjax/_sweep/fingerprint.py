@@ -3,9 +3,11 @@
 A directory is resumed only by the same sweep: the fingerprint is a SHA-256 over
 the batch (every leaf's shape, dtype and bytes), the shared `args`, the system
 (its structure as equinox prints it, and its array parameters' bytes) and the
-`simulate` options (as text, arrays by their bytes). It does not see inside the
-Python functions a system wraps (L, H, T, V): two systems that differ only in a
-function's body, with the same name, have the same fingerprint.
+`simulate` options (as text, arrays by their bytes), and the measure run per member
+when it is not `simulate` (its module and qualified name; a `functools.partial`'s
+bound arguments as text). It does not see inside Python functions — those a system
+wraps (L, H, T, V) or a measure: two that differ only in a function's body, with
+the same name, have the same fingerprint.
 
 The chunk size is kept apart from the fingerprint so that a mismatch can be named
 as such; versions are recorded but left out, so that upgrading JAX does not orphan
@@ -89,13 +91,27 @@ def versions() -> dict[str, str]:
     return dict(_installed_versions())
 
 
+def measure_text(measure: Any) -> str:
+    """A measure function by its module and qualified name (a partial's bound
+    arguments added), without the memory addresses that change between runs."""
+    if isinstance(measure, functools.partial):
+        bound = [_option_text(a) for a in measure.args]
+        bound += [f"{k}={_option_text(v)}" for k, v in sorted(measure.keywords.items())]
+        return f"partial({measure_text(measure.func)}, {bound})"
+    name = getattr(measure, "__qualname__", None) or type(measure).__qualname__
+    return f"{getattr(measure, '__module__', None) or '?'}.{name}"
+
+
 def describe_sweep(
     system: Any,
     y0s: Any,
     args_batch: Any,
     simulate_kwargs: dict[str, Any],
+    measure: str | None = None,
 ) -> tuple[dict[str, Any], str]:
-    """The sweep's parameters (JSON-ready) and the fingerprint of its inputs."""
+    """The sweep's parameters (JSON-ready) and the fingerprint of its inputs;
+    `measure` is `measure_text` of a measure other than `simulate` (None keeps a
+    simulate sweep's fingerprint as it was before measures existed)."""
     parameters = {
         "system": type(system).__name__,
         "y0s": _shapes(y0s),
@@ -104,6 +120,8 @@ def describe_sweep(
             name: _option_text(value) for name, value in sorted(simulate_kwargs.items())
         },
     }
+    if measure is not None:
+        parameters["measure"] = measure
     identity = {
         "parameters": parameters,
         "system": _tree_text(system),

@@ -15,9 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lagjax._sweep.store import FORMAT, failed_members, read_index
-
-_FAILURE_FIELDS = ("result", "stats.finite")
+from lagjax._sweep.store import FAILURE_FIELDS, FORMAT, failed_members, read_index
 
 
 class SweepStore:
@@ -67,9 +65,10 @@ class SweepStore:
 
     def failed(self) -> np.ndarray:
         """True for each member whose `RESULTS` code is a failure or whose state
-        stopped being finite (`lagjax._sweep.store.failed_members`)."""
+        (or measured value) stopped being finite
+        (`lagjax._sweep.store.failed_members`)."""
         return failed_members(
-            {name: self.array(name) for name in _FAILURE_FIELDS if name in self.fields}
+            {name: self.array(name) for name in FAILURE_FIELDS if name in self.fields}
         )
 
     def __repr__(self) -> str:

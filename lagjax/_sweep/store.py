@@ -14,6 +14,13 @@ Each field holds one array per chunk whose leading axis is the chunk's members:
 per leaf), `result` (diffrax's `RESULTS` code: 0 for success; `index.json` maps the
 codes that occurred to their messages) and `stats.*` (the run statistics).
 
+A sweep of another measure (`lj.megno`, say) stores the leaves of its result
+instead: `value` for a single array, the leaves' paths for a pytree (`megno`,
+`fli`, `lyapunov` for `lj.chaos_indicators`), and `finite`: False for a member
+with a NaN or inf anywhere in its result, its failure mark. A measure returns no
+`RESULTS` code; one that raises on a failing member (as `lj.megno` does on a
+non-finite orbit) stops its chunk instead.
+
 A chunk is complete when its directory exists: it is written under a temporary
 name and renamed in one step (atomic on a POSIX file system), so a crash leaves
 either the whole chunk or none of it. `index.json` is rewritten (also atomically)
@@ -65,13 +72,21 @@ def result_messages(traj: Any) -> dict[str, str]:
     return messages
 
 
+FAILURE_FIELDS = ("result", "stats.finite", "finite")
+
+
 def failed_members(arrays: dict[str, np.ndarray]) -> np.ndarray:
-    """True for a member whose `RESULTS` code is a failure, or whose state stopped
-    being finite: a fixed-step run that saves at `ts` can end with NaN states and
-    a successful code (jax 0.10.2, diffrax 0.7.2), so both are read."""
-    failed = ~np.isin(arrays["result"], success_codes())
-    if "stats.finite" in arrays:
-        failed |= ~arrays["stats.finite"].astype(bool)
+    """True for a member whose `RESULTS` code is a failure, or whose state (or
+    measured value) stopped being finite: a fixed-step run that saves at `ts` can
+    end with NaN states and a successful code (jax 0.10.2, diffrax 0.7.2), so both
+    are read."""
+    present = [name for name in FAILURE_FIELDS if name in arrays]
+    failed = np.zeros(len(arrays[present[0]]), dtype=bool)
+    if "result" in arrays:
+        failed |= ~np.isin(arrays["result"], success_codes())
+    for name in ("stats.finite", "finite"):
+        if name in arrays:
+            failed |= ~arrays[name].astype(bool)
     return failed
 
 
@@ -99,6 +114,44 @@ def trajectory_arrays(traj: Any) -> dict[str, np.ndarray]:
     arrays["result"] = np.asarray(codes)
     for key, value in sorted(traj.run_stats.items()):
         arrays[f"stats.{key}"] = np.asarray(value)
+    return arrays
+
+
+def measure_field_names(member_shapes: Any) -> list[str]:
+    """The fields of a measure's result (one member's shapes): `value` for a single
+    array, the leaves' paths for a pytree; refuses a pytree that names a leaf like
+    the failure mark (`finite`) or twice."""
+    leaves = jax.tree_util.tree_leaves_with_path(member_shapes)
+    if len(leaves) == 1 and not leaves[0][0]:
+        return ["value"]
+    names = [_leaf_name("", path).lstrip(".") for path, _ in leaves]
+    if not names:
+        raise ValueError(
+            "the measure returns no arrays: return the value(s) of one member, "
+            "e.g. a scalar or a pytree of arrays"
+        )
+    clashes = sorted({n for n in names if n == "finite" or names.count(n) > 1})
+    if clashes:
+        raise ValueError(
+            f"the measure's result names the field(s) {clashes} twice or like the "
+            "store's failure mark 'finite': rename those leaves (a dict key, say)"
+        )
+    return names
+
+
+def measure_arrays(values: Any) -> dict[str, np.ndarray]:
+    """A batched measure's result as named host arrays, and `finite`: whether every
+    entry of a member's result is finite."""
+    names = measure_field_names(values)
+    arrays = {
+        name: np.asarray(leaf)
+        for name, leaf in zip(names, jax.tree_util.tree_leaves(values), strict=True)
+    }
+    finite = np.ones(next(iter(arrays.values())).shape[0], dtype=bool)
+    for array in arrays.values():
+        if np.issubdtype(array.dtype, np.inexact):
+            finite &= np.isfinite(array.reshape(array.shape[0], -1)).all(axis=1)
+    arrays["finite"] = finite
     return arrays
 
 
@@ -145,12 +198,12 @@ def write_chunk(
     temporary.mkdir()
     for name, array in arrays.items():
         np.save(temporary / f"{name}.npy", array, allow_pickle=False)
-    codes = arrays["result"]
+    members = len(next(iter(arrays.values())))
     entry = {
         "index": index,
         "dir": chunk_name(index),
         "start": start,
-        "stop": start + int(codes.shape[0]),
+        "stop": start + members,
         "failed": int(np.count_nonzero(failed_members(arrays))),
         "result_messages": result_messages,
     }

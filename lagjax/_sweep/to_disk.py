@@ -6,9 +6,13 @@ the directory is touched: the batch's (`lagjax.sweep.chunked_run`: no members, n
 batch axis, sizes or shapes that do not fit, chunk size, devices), a path that is a
 file or cannot be written, a directory that holds other files or another sweep's
 chunks (fingerprint, `lagjax._sweep.fingerprint`), or the same sweep cut into
-other chunks. Members run
-with `throw=False`: a failing member is marked by its `RESULTS` code and the others
-are kept.
+other chunks. `simulate` members run with `throw=False`: a failing member is marked
+by its `RESULTS` code and the others are kept; a measure's member by a non-finite
+value (`lagjax._sweep.store`).
+
+The next chunk is dispatched before the current one is copied to the host and
+written, so that writing overlaps integrating (`lagjax.sweep.chunk_results`: two
+chunks in memory at most).
 """
 
 from __future__ import annotations
@@ -22,8 +26,8 @@ from typing import Any
 
 import jax
 
-from lagjax._integrate.simulate import System
-from lagjax._sweep.fingerprint import describe_sweep, versions
+from lagjax._integrate.simulate import System, simulate
+from lagjax._sweep.fingerprint import describe_sweep, measure_text, versions
 from lagjax._sweep.processes import chunks_of_this_process, wait_for_all_processes
 from lagjax._sweep.progress import ProgressMeter, SweepProgress
 from lagjax._sweep.reader import SweepStore
@@ -31,6 +35,8 @@ from lagjax._sweep.store import (
     FORMAT,
     completed_chunks,
     field_descriptions,
+    measure_arrays,
+    measure_field_names,
     read_index,
     remove_own_leftovers,
     result_messages,
@@ -38,7 +44,7 @@ from lagjax._sweep.store import (
     write_chunk,
     write_index,
 )
-from lagjax.sweep import ChunkedRun, chunked_run
+from lagjax.sweep import ChunkedRun, chunk_results, chunked_run
 
 DEFAULT_CHUNK_SIZE = 4096
 
@@ -141,23 +147,34 @@ def _record(out_dir: Path, index: dict, done: dict[int, dict], tag: str) -> None
     write_index(out_dir, index, tag)
 
 
+def _member_arrays(output: Any, measure: Callable) -> tuple[dict, dict]:
+    """A chunk's results as named host arrays, and the messages of its codes."""
+    if measure is simulate:
+        return trajectory_arrays(output), result_messages(output)
+    return measure_arrays(output), {}
+
+
 def sweep_to_disk(
     system: System,
     y0s: Any,
     args_batch: Any = None,
     *,
     out_dir: str | os.PathLike,
+    measure: Callable[..., Any] = simulate,
     chunk_size: int | None = DEFAULT_CHUNK_SIZE,
     devices: Sequence[Any] | None = None,
     progress: bool | Callable[[SweepProgress], Any] = False,
     attributes: dict[str, Any] | None = None,
-    **simulate_kwargs: Any,
+    **kwargs: Any,
 ) -> SweepStore:
     """`lj.sweep`, streamed to `out_dir` in chunks that survive the process.
 
     **Arguments:** as `lj.sweep`, and
     - `out_dir`: a new or empty directory, or one holding this same sweep (then it is
       resumed after its completed chunks). The format: `lagjax._sweep.store`.
+    - `measure`: what runs per member (as `lj.sweep`); default `lj.simulate`. The
+      fields of another measure's result are stored by name (`value`, or the
+      leaves' paths) with `finite`, the failure mark of a member.
     - `chunk_size`: members per chunk file (rounded up to a multiple of the device
       count); default 4096. A resumed sweep needs the same.
     - `progress`: True prints a line per chunk (members done, rate, time left); a
@@ -165,7 +182,7 @@ def sweep_to_disk(
     - `attributes`: the caller's notes on the sweep, JSON-ready (what each member
       is, say: `lagjax sweep` records its grid), kept in `index.json` as written
       by the call that created the directory.
-    - `simulate_kwargs`: passed to `simulate`, which runs with `throw=False`.
+    - `kwargs`: passed to `measure`; `simulate` runs with `throw=False`.
 
     After `jax.distributed.initialize()` every process writes its share of the chunks
     (`lagjax._sweep.processes`) to the same directory, which must then be on a file
@@ -173,21 +190,29 @@ def sweep_to_disk(
 
     **Returns:** a `SweepStore` of the directory (`store.array("q")`, …).
     """
-    if simulate_kwargs.get("throw", False):
-        raise ValueError(
-            "sweep_to_disk marks a failing member by its RESULTS code instead of "
-            "raising: leave out throw=True"
-        )
-    simulate_kwargs["throw"] = False
+    if measure is simulate:
+        if kwargs.get("throw", False):
+            raise ValueError(
+                "sweep_to_disk marks a failing member by its RESULTS code instead of "
+                "raising: leave out throw=True"
+            )
+        kwargs["throw"] = False
     attributes = _json_ready(attributes)
-    chunks = chunked_run(system, y0s, args_batch, chunk_size, devices, simulate_kwargs)
-    parameters, fingerprint = describe_sweep(system, y0s, args_batch, simulate_kwargs)
+    chunks = chunked_run(system, y0s, args_batch, chunk_size, devices, kwargs, measure)
+    named = None if measure is simulate else measure_text(measure)
+    if named is not None:
+        measure_field_names(chunks.member_shapes)  # refuse clashing names now
+    parameters, fingerprint = describe_sweep(system, y0s, args_batch, kwargs, named)
     parameters["chunk_size"] = chunk_size
     out_dir = Path(out_dir)
     tag = f"{socket.gethostname()}-p{jax.process_index()}"
     index = _open_directory(out_dir, fingerprint, parameters, chunks, attributes, tag)
     remove_own_leftovers(out_dir, tag)
     done = completed_chunks(out_dir)
+    # Every process must deal the same to-do list: none writes a chunk before all
+    # have listed the directory (else a late process, seeing an early one's new
+    # chunks, deals the rest differently and some chunks are run by no one).
+    wait_for_all_processes("lagjax sweep_to_disk: chunks listed")
     mine = chunks_of_this_process(
         chunks.count, [i for i in range(chunks.count) if i not in done]
     )
@@ -200,12 +225,9 @@ def sweep_to_disk(
         jax.process_index(),
         jax.process_count(),
     )
-    for chunk in mine:
-        traj = chunks.run(chunk)
-        arrays = trajectory_arrays(traj)
-        entry = write_chunk(
-            out_dir, chunk, chunk * chunks.step, arrays, result_messages(traj), tag
-        )
+    for chunk, output in zip(mine, chunk_results(chunks, mine), strict=True):
+        arrays, messages = _member_arrays(output, measure)
+        entry = write_chunk(out_dir, chunk, chunk * chunks.step, arrays, messages, tag)
         done[chunk] = entry
         index["fields"] = index["fields"] or field_descriptions(arrays)
         _record(out_dir, index, dict(sorted(done.items())), tag)

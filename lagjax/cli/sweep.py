@@ -2,13 +2,15 @@
 
     lagjax sweep SCENE --out DIR [--param NAME=VALUES ...] [--q0 [COORD=]VALUES ...]
                  [--qdot0 | --p0 [COORD=]VALUES ...] [--zip] [--t1 T] [--dt DT]
-                 [--solver NAME] [--saves N] [--chunk-size N] [--quiet]
+                 [--solver NAME] [--saves N] [--measure megno] [--chunk-size N]
+                 [--quiet]
                  [--distributed | --coordinator HOST:PORT --processes P --process-id K]
 
 One member per point of the grid (`lagjax.cli.sweep_grid` says how VALUES and the
-grid are written); every member is one `simulate` run of the scene from t = 0 to t1,
-and `lj.sweep_to_disk` streams the results to DIR in chunks (`.npy` files and an
-`index.json` that also records the grid: `attributes`). Rerunning the same command
+grid are written); every member is one `simulate` run of the scene from t = 0 to t1
+— or, with `--measure megno`, its MEGNO ⟨Y⟩(t1) (`lj.megno`: a MEGNO map, field
+`value`) — and `lj.sweep_to_disk` streams the results to DIR in chunks (`.npy`
+files and an `index.json` that also records the grid: `attributes`). Rerunning the same command
 resumes after the chunks already on disk. Progress (members done, rate, time left)
 goes to stderr, one line per chunk; the summary to stdout.
 
@@ -38,6 +40,7 @@ import numpy as np
 
 from lagjax import scenes as scene_catalog
 from lagjax._integrate.checks.inputs import check_times
+from lagjax._integrate.simulate import simulate
 from lagjax._integrate.solver_choice import default_solver
 from lagjax._sweep.progress import SweepProgress
 from lagjax._sweep.reader import open_sweep
@@ -52,8 +55,11 @@ from lagjax.cli.sweep_grid import (
     split_parameters,
     state_setting,
 )
+from lagjax.phase_space.indicators import megno
 
 INTERRUPTED = 130
+# What `--measure` may ask of a member besides its trajectory.
+MEASURES = {"megno": megno}
 
 
 def add_sweep_command(commands: Any, solvers: dict[str, Callable[[], Any]]) -> None:
@@ -86,6 +92,11 @@ def add_sweep_command(commands: Any, solvers: dict[str, Callable[[], Any]]) -> N
     sweep.add_argument("--solver", default=None, help=f"one of: {', '.join(solvers)}")
     sweep.add_argument(
         "--saves", type=int, default=None, help="save N times from 0 to t1"
+    )
+    sweep.add_argument(
+        "--measure",
+        default=None,
+        help=f"store a measure instead of the trajectory: {', '.join(MEASURES)}",
     )
     sweep.add_argument(
         "--chunk-size", type=int, default=DEFAULT_CHUNK_SIZE, help="members per file"
@@ -217,6 +228,7 @@ def command_sweep(args) -> int:
         )
     if args.chunk_size < 1:
         raise UsageError(f"--chunk-size must be at least 1, got {args.chunk_size}")
+    measure = _measure(args)
     solver = None if args.solver is None else args.solvers[args.solver]()
     system, y0s, scenes, grid = _members(args, scene_class, default)
     reports: list[SweepProgress] = []
@@ -226,12 +238,15 @@ def command_sweep(args) -> int:
         if not args.quiet:
             print(report.line(), file=sys.stderr, flush=True)
 
-    options = dict(t1=t1, dt=dt, solver=solver, ts=ts)
+    options = dict(t1=t1, dt=dt, solver=solver)
+    if measure is simulate:
+        options["ts"] = ts
     start = time.perf_counter()
     try:
         store = sweep_to_disk(
             system, y0s, scenes, out_dir=args.out, chunk_size=args.chunk_size,
-            progress=progress, attributes={"lagjax sweep": grid}, **options,
+            progress=progress, attributes={"lagjax sweep": grid}, measure=measure,
+            **options,
         )  # fmt: skip
     except (ValueError, TypeError) as error:
         if reports:  # a chunk was written: not a refusal, a failure
@@ -245,6 +260,22 @@ def command_sweep(args) -> int:
         for line in _summary(store, grid, solver_name, t1, dt, reports, seconds):
             print(line)
     return 0
+
+
+def _measure(args) -> Any:
+    """The function run per member: `simulate`, or the one `--measure` names."""
+    if args.measure is None:
+        return simulate
+    if args.measure not in MEASURES:
+        raise UsageError(
+            f"unknown measure {args.measure!r}; choose from {', '.join(MEASURES)}"
+        )
+    if args.saves is not None:
+        raise UsageError(
+            f"--saves keeps states along the trajectory, which --measure "
+            f"{args.measure} does not store: leave one of them out"
+        )
+    return MEASURES[args.measure]
 
 
 def _interrupted(out: Path) -> int:
@@ -275,7 +306,10 @@ def _summary(store, grid, solver_name, t1, dt, reports, seconds) -> list[str]:
         f"scene     {grid['scene']}",
         f"members   {total}" + (f" = {axes}" if axes else "")
         + (" (zipped)" if grid["layout"] == "zip" else ""),
-        f"solver    {solver_name}, t1 = {t1:g}, dt = {dt:g}",
+        f"solver    {solver_name}, t1 = {t1:g}, dt = {dt:g}"
+        + (f"; measure {index['parameters']['measure']} in field "
+           f"{', '.join(f for f in store.fields if f != 'finite')}"
+           if "measure" in index["parameters"] else ""),
         f"chunks    {len(index['chunks'])} of {index['chunk_count']} on disk "
         f"({done - this_call} members resumed, {this_call} run now)",
         f"time      {seconds:.2f} s"
@@ -292,10 +326,13 @@ def _failures(store, index) -> list[str]:
     if not failed:
         return ["failed    0 members"]
     members = np.flatnonzero(store.failed())
-    code = str(int(store.array("result")[members[0]]))
-    reason = index["result_messages"].get(code, "")
-    if code == "0":
-        reason = "the state stopped being finite"
+    if "result" not in store.fields:  # a measure: no RESULTS code, a NaN or inf
+        reason = "its measured value is not finite"
+    else:
+        code = str(int(store.array("result")[members[0]]))
+        reason = index["result_messages"].get(code, "")
+        if code == "0":
+            reason = "the state stopped being finite"
     return [
         f"failed    {failed} members (first: member {members[0]}, {first_line(reason)})"
     ]
