@@ -8,10 +8,13 @@ timed apart, every figure in one run:
   in long double when installed, else this integrator at order 26, tol 1e-16);
 - diffrax Dopri8 through `lj.simulate` at rtol = atol = 1e-14 beside it;
 - heyoka's `taylor_adaptive` at the same tolerances, when installed;
-- 1024 trajectories (θ₁ ∈ [0.1, 1], θ₂ = 0.3) to t = 10 under `jax.vmap` and by
-  the batch-native loop (`lagjax.taylor.batch.taylor_integrate_batch`: the
-  scalar graph, the batch on the minor axis, one order, a step per member),
-  beside heyoka's batch mode at its SIMD width when installed;
+- 1024 trajectories (θ₁ ∈ [0.1, 1], θ₂ = 0.3) to t = 10 under `jax.vmap` of the
+  one-trajectory loop, by the batch-native loop
+  (`lagjax.taylor.batch.taylor_integrate_batch`: the scalar graph, the batch on
+  the minor axis, one order, a step per member), and as users write it,
+  `jax.jit(jax.vmap(simulate(..., solver=lj.Taylor())))` (which runs the batch
+  loop, `lagjax.taylor.vmap_rule`), beside heyoka's batch mode at its SIMD width
+  when installed;
 - the compiled program's size: HLO instructions and fusions (XLA CPU kernels).
 
 `--quick` runs a reduced version (compilation dominates: about half a minute) (t = 10, one tolerance, 8 members).
@@ -207,16 +210,26 @@ def batch(t1: float, size: int, tol: float, repeats: int) -> None:
     if peer:
         error = float(np.max(np.abs(peer[1] - np.asarray(reference))))
         print(f"  heyoka batch mode: {peer[0] * 1e3:.1f} ms, error {error:.1e}")
+
+    def simulated(y):
+        run = lj.simulate(
+            LAGRANGIAN, (y[:2], y[2:]), t1=t1, solver=lj.Taylor(rtol=tol, atol=tol)
+        )
+        return jnp.concatenate([run.q[-1], run.qdot[-1]])
+
     routes = {
         "vmap(taylor_integrate)": jax.vmap(
-            lambda y: taylor_integrate(vector_field, y, 0.0, t1, rtol=tol, atol=tol)
+            lambda y: taylor_integrate(vector_field, y, 0.0, t1, rtol=tol, atol=tol).ys[
+                -1
+            ]
         ),
         "taylor_integrate_batch": lambda y: taylor_integrate_batch(
             vector_field, y, 0.0, t1, rtol=tol, atol=tol
-        ),
+        ).ys[:, -1],
+        "jit(vmap(simulate(Taylor)))": jax.vmap(simulated),
     }
     for name, route in routes.items():
-        run = jax.jit(lambda y, route=route: route(y).ys[:, -1])
+        run = jax.jit(route)
         first, median, final = timed(run, y0s, repeats=repeats)
         error = float(jnp.max(jnp.abs(final - reference)))
         _, fusions = kernel_census(run, y0s)
@@ -232,7 +245,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="a few seconds' version")
     options = parser.parse_args()
-    os.sched_setaffinity(0, {0})  # one core, as the peers (Linux)
+    # one core, as the peers (Linux): the one `taskset` gave, else the first
+    os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
     jax.config.update("jax_enable_x64", True)
     whole_loops = "xla_cpu_small_while_loop_byte_threshold" in os.environ.get(
         "XLA_FLAGS", ""

@@ -134,13 +134,19 @@ def test_energy_of_every_member_is_kept(pendulum_batch):
 
 def test_many_saves_per_member_follow_the_oscillator():
     oscillator = lambda t, y, args: jnp.stack([y[1], -y[0]])
-    ts = jnp.linspace(0.0, 5.0, 41)  # more than SMALL_SAVES: the inner saving loop
+    # more than SMALL_SAVES (the inner saving loop), a grid and an end per member
+    t1s = jnp.array([5.0, 3.0])
+    ts = jnp.linspace(0.0, 1.0, 41)[None, :] * t1s[:, None]
     y0s = jnp.array([[1.0, 0.0], [0.0, 2.0]])
-    run = taylor_integrate_batch(oscillator, y0s, 0.0, 5.0, ts=ts)
+    run = taylor_integrate_batch(oscillator, y0s, 0.0, t1s, ts=ts)
+    assert run.ts.shape == (2, 41)
     exact = jnp.stack(
-        [jnp.cos(ts), -jnp.sin(ts), 2 * jnp.sin(ts), 2 * jnp.cos(ts)], axis=1
-    ).reshape(41, 2, 2)
-    np.testing.assert_allclose(run.ys, jnp.moveaxis(exact, 1, 0), rtol=0, atol=1e-13)
+        [
+            jnp.stack([jnp.cos(ts[0]), -jnp.sin(ts[0])], axis=1),
+            jnp.stack([2 * jnp.sin(ts[1]), 2 * jnp.cos(ts[1])], axis=1),
+        ]
+    )
+    np.testing.assert_allclose(run.ys, exact, rtol=0, atol=1e-13)
 
 
 def test_max_steps_is_reported_per_member():

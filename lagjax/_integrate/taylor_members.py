@@ -11,7 +11,8 @@ run). `lj.sweep` hands its chunks of members here when the solver is
 `Trajectory` with a leading member axis.
 
 The batch loop is a forward computation: for gradients through a Taylor sweep,
-vmap `simulate` (the one-trajectory loop reverse mode can enter).
+vmap `simulate`, whose values come from the same batch loop and whose
+derivatives from the one-trajectory loop (`lagjax.taylor.vmap_rule`).
 """
 
 from __future__ import annotations
@@ -73,7 +74,7 @@ def taylor_members(
     solution = taylor_integrate_batch(
         field, flat0s, t0, t1, ts=ts, args=args,
         args_axis=None if args_batch is None else 0,
-        rtol=rtol, atol=atol, order=solver.order, max_steps=steps,
+        rtol=rtol, atol=atol, order=solver.order, max_steps=steps, tile=solver.tile,
     )  # fmt: skip
     size = flat0s.shape[0]
     saved_ts = jnp.broadcast_to(solution.ts, (size, *jnp.shape(solution.ts)[-1:]))

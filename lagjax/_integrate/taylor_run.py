@@ -8,7 +8,9 @@ what both routes work from:
 
 - `backend="jax"` (`lagjax.taylor.taylor_integrate`): the Taylor coefficients by
   the recurrences of each primitive, order and step from the tolerance, the saves
-  from the step polynomial; under `jit`, `vmap` and `grad`.
+  from the step polynomial; under `jit`, `vmap` and `grad`. `jax.vmap` of the run
+  is the batch-native loop (`lagjax.taylor.vmap_rule`: one order, a step per
+  member, the batch on the minor axis), not the batched one-trajectory loop.
 - `backend="heyoka"` (`lagjax.taylor.heyoka_backend`): the jaxpr translated into
   heyoka's expressions (the parameters as heyoka parameters, so new `args` do not
   recompile) and integrated by heyoka's LLVM-compiled Taylor method; concrete
@@ -43,10 +45,9 @@ from lagjax._integrate.taylor_heyoka import (
     heyoka_runner,
     run_statistics,
 )
-from lagjax._integrate.taylor_polynomial_run import simulate_taylor_polynomials
 from lagjax.taylor.integrate import RESULTS as TAYLOR_RESULTS
-from lagjax.taylor.integrate import taylor_integrate
 from lagjax.taylor.solver import Taylor
+from lagjax.taylor.vmap_rule import taylor_integrate_vmappable
 from lagjax.trajectory import Trajectory
 
 
@@ -56,8 +57,13 @@ def run_taylor(
     event: Any = None, **options: Any,
 ) -> Trajectory:  # fmt: skip
     """`simulate` for a `Taylor` solver: the checks, the run, the verdict."""
-    dense = bool(options.pop("dense", False))
-    refuse_taylor_options(dt=dt, dense=dense and solver.backend == "heyoka", **options)
+    if event is not None and solver.backend != "heyoka":
+        raise ValueError(
+            "lj.Taylor(backend='jax') does not locate events yet: pass "
+            "solver=lj.Taylor(backend='heyoka') (events on the step polynomial) or "
+            "a diffrax solver (diffrax.Dopri8())"
+        )
+    refuse_taylor_options(dt=dt, **options)
     if t1 is None and isinstance(system, AbstractSystem):
         t1 = system.default_span()[0]
     y0 = check_simulate_inputs(system, y0, t0, t1, None, None, ts, args, max_steps)
@@ -77,17 +83,10 @@ def run_taylor(
     else:
         y0, args = cast_floats(y0, dtype), cast_floats(args, dtype)
         save_ts = None if ts is None else jnp.asarray(ts, dtype=dtype)
-    if solver.backend == "jax" and (event is not None or dense):
-        # events and dense output from the step polynomials (taylor_polynomial_run)
-        trajectory = simulate_taylor_polynomials(
-            system, flat_vector_field(system, y0), t0, t1, save_ts, args, solver,
-            rtol=rtol, atol=atol, max_steps=max_steps, event=event, dense=dense,
-        )  # fmt: skip
-    else:
-        trajectory = simulate_taylor(
-            system, y0, t0, t1, save_ts, args, solver,
-            rtol=rtol, atol=atol, max_steps=max_steps, event=event,
-        )  # fmt: skip
+    trajectory = simulate_taylor(
+        system, y0, t0, t1, save_ts, args, solver,
+        rtol=rtol, atol=atol, max_steps=max_steps, event=event,
+    )  # fmt: skip
     if throw:
         trajectory = _verdict(trajectory, rtol)
     return trajectory
@@ -127,9 +126,9 @@ def refuse_taylor_options(**options: Any) -> None:
     if given:
         raise ValueError(
             f"lj.Taylor does not support {', '.join(given)} yet: save at given "
-            "times with ts=... (filled from the step polynomials), dense output "
-            "with lj.Taylor(backend='jax'), or use a diffrax solver "
-            "(diffrax.Dopri8()) for step-size controllers and custom adjoints"
+            "times with ts=... (filled from the step polynomials), or use a diffrax "
+            "solver (diffrax.Dopri8()) for dense output, step-size controllers and "
+            "custom adjoints"
         )
 
 
@@ -229,9 +228,10 @@ def simulate_taylor(
             ts=rows.ts, ys=ys, system=system, args=args, run_stats=stats,  # pyright: ignore[reportArgumentType]
             result=result, solver_name="Taylor[heyoka]",
         )  # fmt: skip
-    solution = taylor_integrate(
+    solution = taylor_integrate_vmappable(
         field, flat0, t0, t1, ts=ts, args=args, rtol=rtol, atol=atol,
         order=solver.order, max_steps=steps, forward_mode=solver.forward_mode,
+        tile=solver.tile,
     )  # fmt: skip
     stats: dict[str, Any] = {
         "num_steps": solution.num_steps,

@@ -11,12 +11,15 @@ writes the batch loop directly instead, as heyoka's batch mode does:
 - the batch on the last (minor) axis of every value: the state is (n, B), a
   series (p + 1, *shape, B), so each elementary operation of every recurrence is
   one vector operation over the members (SIMD on a CPU, a wide kernel on a GPU);
-- one `while_loop` over steps per tile of `tile` members (32 by default) until
-  every member of the tile reached t1; a finished member takes zero steps
-  (τᵦ = 0) and keeps its state. Tiles run in turn (`lax.map`): a member waits
-  only for its tile's slowest, and a tile's tape stays in cache (on the
-  double pendulum ×1024, tiles of 16, 32, 64, 128: 2.5, 2.1, 2.8, 3.5× heyoka's
-  batch mode, loaded machine);
+- one `while_loop` over steps per tile of members until every member of the
+  tile reached t1; a finished member takes zero steps (τᵦ = 0) and keeps its
+  state. Tiles run in turn (`lax.map`): a member waits only for its tile's
+  slowest. The tile depends on where the loop runs (`default_tile`): on a CPU
+  32 members, so a tile's tape stays in cache (double pendulum ×1024, tiles of
+  16, 32, 64, 128: 2.5, 2.1, 2.8, 3.5× heyoka's batch mode, loaded machine); on
+  a GPU or TPU the whole batch up to `ACCELERATOR_TILE` members, since a kernel
+  over 32 lanes leaves the device idle (double pendulum ×10⁴ to t = 10 at 1e-12
+  on an H200: tiles of 32, 631 members/s; the whole batch, 7.4e4/s);
 - the coefficients by the scalar graph on a tape (`tape`): per order, the inner
   Cauchy sums of every operation, then O(1) per operation.
 
@@ -37,6 +40,7 @@ from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
+from jax.core import Tracer
 
 from .coefficients import graph_coefficients, lower_vector_field
 from .integrate import (
@@ -47,6 +51,14 @@ from .integrate import (
     two_sum,
 )
 from .step import horner, step_size
+
+# Members per tile on a CPU: the tape of a tile stays in cache (module docstring).
+CPU_TILE = 32
+# Members per tile at most on a GPU or TPU. A tile's loop holds the series of
+# every tape value, (p + 1) × tile numbers each, and past a few 10⁵ members the
+# throughput falls (double pendulum ×10⁶ to t = 10 at 1e-12 on an H200: tiles of
+# 2¹⁷, 1.7e5 members/s; 2¹⁸, 1.64e5/s; one tile of 10⁶, 4.3e4/s).
+ACCELERATOR_TILE = 2**17
 
 
 class _Carry(NamedTuple):
@@ -80,13 +92,13 @@ def _leaf_axes(args: Any, args_axis: Any) -> tuple[bool, ...]:
 
 
 def _masked_saver(ts: jax.Array, direction: jax.Array) -> Callable:
-    """Few save times: every step evaluates its polynomial at all of them and
-    keeps those inside each member's step."""
+    """Few save times (`ts`: (S, B), a column per member): every step evaluates
+    its polynomial at all of them and keeps those inside each member's step."""
 
     def save(coeffs, t, t_low, t_new, ys, index, ok):
-        taus = (ts[:, None] - t) - t_low  # (S, B)
-        inside = ok & (direction * (ts[:, None] - t) > 0)
-        inside &= direction * (ts[:, None] - t_new) <= 0
+        taus = (ts - t) - t_low  # (S, B)
+        inside = ok & (direction * (ts - t) > 0)
+        inside &= direction * (ts - t_new) <= 0
         values = horner(coeffs, taus[:, None, :])  # (S, n, B)
         return jnp.where(inside[:, None, :], values, ys), index
 
@@ -94,21 +106,23 @@ def _masked_saver(ts: jax.Array, direction: jax.Array) -> Callable:
 
 
 def _loop_saver(ts: jax.Array, direction: jax.Array) -> Callable:
-    """Many save times: each member fills its next save while it lies inside its
-    step, one save per member per inner iteration."""
+    """Many save times (`ts`: (S, B)): each member fills its next save while it
+    lies inside its step, one save per member per inner iteration."""
     last = ts.shape[0] - 1
 
     def save(coeffs, t, t_low, t_new, ys, index, ok):
         members = jnp.arange(t.shape[0])
 
+        def next_time(i):
+            return ts[jnp.minimum(i, last), members]
+
         def wanted(i):
-            due = direction * (ts[jnp.minimum(i, last)] - t_new) <= 0
-            return ok & (i <= last) & due
+            return ok & (i <= last) & (direction * (next_time(i) - t_new) <= 0)
 
         def body(c):
             i, ys = c
             want = wanted(i)
-            values = horner(coeffs, (ts[jnp.minimum(i, last)] - t) - t_low)
+            values = horner(coeffs, (next_time(i) - t) - t_low)
             row = jnp.where(want, i, last + 1)  # out of bounds: dropped
             ys = ys.at[row, :, members].set(values.T, mode="drop")
             return i + want, ys
@@ -119,6 +133,27 @@ def _loop_saver(ts: jax.Array, direction: jax.Array) -> Callable:
         return ys, index
 
     return save
+
+
+def default_tile(platform: str, members: int) -> int:
+    """Members per tile for a batch of `members` run on `platform` ("cpu",
+    "gpu", "cuda", "rocm", "tpu"): `CPU_TILE` on a CPU; elsewhere the whole batch
+    in as few equal tiles of at most `ACCELERATOR_TILE` as it takes."""
+    if platform == "cpu":
+        return CPU_TILE
+    count = -(-members // ACCELERATOR_TILE)
+    return max(1, -(-members // count))
+
+
+def placement_platform(x: Any) -> str:
+    """The platform `x` is computed on: its device's for a concrete array, else
+    JAX's default device's (under `jit` a traced value has no device yet)."""
+    if isinstance(x, jax.Array) and not isinstance(x, Tracer):
+        return next(iter(x.devices())).platform
+    device = jax.config.jax_default_device  # pyright: ignore[reportAttributeAccessIssue]
+    if device is not None:
+        return device if isinstance(device, str) else device.platform
+    return jax.default_backend()
 
 
 def taylor_integrate_batch(
@@ -136,17 +171,20 @@ def taylor_integrate_batch(
     max_steps: int = 1_000_000,
     unroll: bool = False,
     scalar: bool = True,
-    tile: int = 32,
+    tile: int | None = None,
 ) -> TaylorSolution:
     """Integrate y' = vector_field(t, y, args) for every row of `y0s` (shape
     (B, n)) from t0 to t1 (scalars, or one per member, shape (B,)), by Taylor's
     method with one step size per member. Returns a `TaylorSolution` whose `ys`
-    has shape (B, len(ts), n) and whose `num_steps` and `result` have shape (B,).
+    has shape (B, S, n) and whose `num_steps` and `result` have shape (B,).
 
-    `ts` (default [t1]) are save times shared by the batch, ordered from t0
-    towards t1. `args_axis` says which leaves of args carry the batch on their
-    axis 0, like `jax.vmap`'s in_axes (None: shared by all members).
-    `vector_field` sees one member, exactly as for `taylor_integrate`.
+    `ts` are the S save times, ordered from t0 towards t1: shape (S,) shared by
+    the batch, or (B, S) a row per member; the default is t1 (shape (1,), or
+    (B, 1) for a t1 per member); `TaylorSolution.ts` has the shape given.
+    `args_axis` says which leaves of args carry the batch on their axis 0, like
+    `jax.vmap`'s in_axes (None: shared by all members). `vector_field` sees one
+    member, exactly as for `taylor_integrate`. `tile`: members per loop (None:
+    `default_tile` for the platform the batch runs on).
     """
     p = resolve_order(rtol, atol, order)
     y0s = jnp.asarray(y0s)
@@ -157,14 +195,9 @@ def taylor_integrate_batch(
             "taylor_integrate"
         )
     members, dtype = y0s.shape[0], y0s.dtype
-    t0 = jnp.broadcast_to(jnp.asarray(t0, dtype), (members,))
-    t1 = jnp.broadcast_to(jnp.asarray(t1, dtype), (members,))
-    ts = jnp.atleast_1d(jnp.asarray(t1[0] if ts is None else ts, dtype))
-    if ts.ndim != 1:
-        raise TypeError(
-            f"lagjax.taylor_integrate_batch: ts must be 1-D (shared by the batch), "
-            f"got shape {ts.shape}"
-        )
+    tile = _checked_tile(tile, y0s)
+    t0, t1, ts, member_ts = _member_times(t0, t1, ts, members, dtype)
+    saves = member_ts.shape[0]
     leaf_flags = _leaf_axes(args, args_axis)
     leaves = [
         jnp.moveaxis(jnp.asarray(leaf), 0, -1) if batched else leaf
@@ -176,9 +209,9 @@ def taylor_integrate_batch(
         jax.tree_util.tree_unflatten(jax.tree_util.tree_structure(args), leaf_flags),
     )
     graph, _ = lower_vector_field(vector_field, t0[0], y0s[0], one_args, scalar=scalar)
-    saver = _masked_saver if ts.shape[0] <= SMALL_SAVES else _loop_saver
+    saver = _masked_saver if saves <= SMALL_SAVES else _loop_saver
 
-    def run_tile(t0, t1, y0, leaves):
+    def run_tile(t0, t1, ts, y0, leaves):
         direction = jnp.where(t1 >= t0, 1.0, -1.0).astype(dtype)
         save = saver(ts, direction)
 
@@ -213,7 +246,7 @@ def taylor_integrate_batch(
             running = (c.t != t1) & (c.result == RESULTS.successful)
             return jnp.any(running) & (c.count < max_steps)
 
-        at_start = direction * (ts[:, None] - t0) <= 0  # (S, B)
+        at_start = direction * (ts - t0) <= 0  # (S, B)
         width = t0.shape[0]
         init = _Carry(
             t=t0,
@@ -235,21 +268,51 @@ def taylor_integrate_batch(
         )
         return final.ys, final.num_steps, result
 
-    ys, num_steps, result = _tiled(run_tile, (t0, t1, y0s.T, leaves), leaf_flags, tile)
+    ys, num_steps, result = _tiled(
+        run_tile, (t0, t1, member_ts, y0s.T, leaves), leaf_flags, tile
+    )
     return TaylorSolution(
         ts=ts, ys=jnp.moveaxis(ys, -1, 0), num_steps=num_steps, result=result, order=p
     )
 
 
+def _checked_tile(tile: int | None, y0s: jax.Array) -> int:
+    """The user's tile, or the platform's default for this batch."""
+    if tile is None:
+        return default_tile(placement_platform(y0s), y0s.shape[0])
+    if not isinstance(tile, int) or tile < 1:
+        raise ValueError(
+            f"lagjax.taylor_integrate_batch: tile must be a positive int, got {tile!r}"
+        )
+    return tile
+
+
+def _member_times(t0: Any, t1: Any, ts: Any, members: int, dtype: Any) -> tuple:
+    """(t0, t1) one per member, shape (B,); `ts` as given, (S,) or (B, S) (t1
+    by default); and the save times a column per member, shape (S, B)."""
+    if ts is None:
+        ts = jnp.asarray(t1, dtype)[..., None]
+    ts = jnp.atleast_1d(jnp.asarray(ts, dtype))
+    if not (ts.ndim == 1 or (ts.ndim == 2 and ts.shape[0] == members)):
+        raise TypeError(
+            "lagjax.taylor_integrate_batch: ts must have shape (S,) (shared by the "
+            f"batch) or ({members}, S) (a row per member), got shape {ts.shape}"
+        )
+    t0 = jnp.broadcast_to(jnp.asarray(t0, dtype), (members,))
+    t1 = jnp.broadcast_to(jnp.asarray(t1, dtype), (members,))
+    columns = ts.T if ts.ndim == 2 else ts[:, None]
+    return t0, t1, ts, jnp.broadcast_to(columns, (ts.shape[-1], members))
+
+
 def _tiled(run: Callable, inputs: tuple, leaf_flags: tuple, tile: int) -> Any:
-    """`run(t0, t1, y0, leaves)` on tiles of `tile` members in turn (the batch
-    axis last everywhere): a member waits only for its tile's slowest, and a
-    tile's values stay in cache. The batch is padded with copies of its last
+    """`run(t0, t1, ts, y0, leaves)` on tiles of `tile` members in turn (the
+    batch axis last everywhere): a member waits only for its tile's slowest, and
+    a tile's values stay in cache. The batch is padded with copies of its last
     member to a whole number of tiles."""
-    t0, t1, y0, leaves = inputs
+    t0, t1, ts, y0, leaves = inputs
     members = t0.shape[0]
     if members <= tile:
-        return run(t0, t1, y0, leaves)
+        return run(t0, t1, ts, y0, leaves)
     count = -(-members // tile)
     pad = count * tile - members
 
@@ -264,10 +327,11 @@ def _tiled(run: Callable, inputs: tuple, leaf_flags: tuple, tile: int) -> Any:
     batched = [split(x) for x, b in zip(leaves, leaf_flags) if b]
 
     def one(tile_inputs):
-        t0, t1, y0, picked = tile_inputs
+        t0, t1, ts, y0, picked = tile_inputs
         it = iter(picked)
         tile_leaves = [next(it) if b else x for x, b in zip(leaves, leaf_flags)]
-        return run(t0, t1, y0, tile_leaves)
+        return run(t0, t1, ts, y0, tile_leaves)
 
-    outputs = jax.lax.map(one, (split(t0), split(t1), split(y0), batched))
+    tiles = (split(t0), split(t1), split(ts), split(y0), batched)
+    outputs = jax.lax.map(one, tiles)
     return jax.tree_util.tree_map(merge, outputs)

@@ -30,7 +30,9 @@ class Taylor(eqx.Module):
     """Adaptive-order Taylor integration: `rtol`, `atol` (positive; None: those
     given to `simulate`), `order` (None: from the tolerance), `max_steps`,
     `forward_mode` (True for `jax.jvp`/`jax.jacfwd` through the run, False for
-    `jax.grad`), `backend` ("jax" or "heyoka")."""
+    `jax.grad`), `backend` ("jax" or "heyoka"), `tile` (members per loop when
+    `jax.vmap` of `simulate` runs the batch-native loop, `lagjax.taylor.batch`;
+    None: 32 on a CPU, the whole batch up to 2¹⁷ on a GPU or TPU)."""
 
     rtol: float | None = None
     atol: float | None = None
@@ -38,6 +40,7 @@ class Taylor(eqx.Module):
     max_steps: int = eqx.field(static=True, default=1_000_000)
     forward_mode: bool = eqx.field(static=True, default=False)
     backend: str = eqx.field(static=True, default="jax")
+    tile: int | None = eqx.field(static=True, default=None)
 
     def __check_init__(self):
         for name in ("rtol", "atol"):
@@ -45,6 +48,10 @@ class Taylor(eqx.Module):
                 check_tolerance(name, getattr(self, name))
         if self.rtol is not None and self.atol is not None:
             resolve_order(self.rtol, self.atol, self.order)
+        if self.tile is not None and (not isinstance(self.tile, int) or self.tile < 1):
+            raise ValueError(
+                f"lagjax.Taylor: tile must be a positive int or None, got {self.tile!r}"
+            )
         if self.backend not in ("jax", "heyoka"):
             raise ValueError(
                 f"lagjax.Taylor: backend must be 'jax' or 'heyoka', got {self.backend!r}"
