@@ -45,6 +45,7 @@ from lagjax._integrate.taylor_heyoka import (
     heyoka_runner,
     run_statistics,
 )
+from lagjax._integrate.taylor_polynomial_run import simulate_taylor_polynomials
 from lagjax.taylor.integrate import RESULTS as TAYLOR_RESULTS
 from lagjax.taylor.solver import Taylor
 from lagjax.taylor.vmap_rule import taylor_integrate_vmappable
@@ -57,13 +58,8 @@ def run_taylor(
     event: Any = None, **options: Any,
 ) -> Trajectory:  # fmt: skip
     """`simulate` for a `Taylor` solver: the checks, the run, the verdict."""
-    if event is not None and solver.backend != "heyoka":
-        raise ValueError(
-            "lj.Taylor(backend='jax') does not locate events yet: pass "
-            "solver=lj.Taylor(backend='heyoka') (events on the step polynomial) or "
-            "a diffrax solver (diffrax.Dopri8())"
-        )
-    refuse_taylor_options(dt=dt, **options)
+    dense = bool(options.pop("dense", False))
+    refuse_taylor_options(dt=dt, dense=dense and solver.backend == "heyoka", **options)
     if t1 is None and isinstance(system, AbstractSystem):
         t1 = system.default_span()[0]
     y0 = check_simulate_inputs(system, y0, t0, t1, None, None, ts, args, max_steps)
@@ -83,10 +79,17 @@ def run_taylor(
     else:
         y0, args = cast_floats(y0, dtype), cast_floats(args, dtype)
         save_ts = None if ts is None else jnp.asarray(ts, dtype=dtype)
-    trajectory = simulate_taylor(
-        system, y0, t0, t1, save_ts, args, solver,
-        rtol=rtol, atol=atol, max_steps=max_steps, event=event,
-    )  # fmt: skip
+    if solver.backend == "jax" and (event is not None or dense):
+        # events and dense output from the step polynomials (taylor_polynomial_run)
+        trajectory = simulate_taylor_polynomials(
+            system, flat_vector_field(system, y0), t0, t1, save_ts, args, solver,
+            rtol=rtol, atol=atol, max_steps=max_steps, event=event, dense=dense,
+        )  # fmt: skip
+    else:
+        trajectory = simulate_taylor(
+            system, y0, t0, t1, save_ts, args, solver,
+            rtol=rtol, atol=atol, max_steps=max_steps, event=event,
+        )  # fmt: skip
     if throw:
         trajectory = _verdict(trajectory, rtol)
     return trajectory
@@ -126,9 +129,9 @@ def refuse_taylor_options(**options: Any) -> None:
     if given:
         raise ValueError(
             f"lj.Taylor does not support {', '.join(given)} yet: save at given "
-            "times with ts=... (filled from the step polynomials), or use a diffrax "
-            "solver (diffrax.Dopri8()) for dense output, step-size controllers and "
-            "custom adjoints"
+            "times with ts=... (filled from the step polynomials), dense output "
+            "with lj.Taylor(backend='jax'), or use a diffrax solver "
+            "(diffrax.Dopri8()) for step-size controllers and custom adjoints"
         )
 
 
