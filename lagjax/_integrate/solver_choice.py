@@ -53,19 +53,21 @@ HIGH_ORDER_RTOL = 1e-9
 # (`AbstractSystem.gravitation`; the Kepler scene) runs TimeTransformed(KahanLi8)
 # instead below rtol 1e-7, its fictitious step derived from rtol
 # (`lagjax._integrate.geometric_choice`; simulate asks it before this module).
-# Measured (`benchmarks/tolerance_choice.py`, 100 periods from pericentre, saves at
-# the apocentres, one pinned core of the loaded 2-core machine, fastest of five
-# warm runs): at rtol 1e-12 the energy stays at round-off (2e-15 … 4e-12, the
-# last the start state's own rounding at e = 0.9999) against Dopri8's 6e-11 …
-# 8.5e-9, the mean anomaly within 3e-10 … 3e-9 rad against 1e-8 … 4e-6, in
-# 77–100 ms against Dopri8's 64–150 ms (slower at e = 0.5, 1.25×; quicker from
-# e = 0.999 on, 1.5×); at 1e-10, 1.9e-15 … 4e-12 and 3e-8 rad against 6e-9 …
-# 4e-6 and 2e-6 … 2e-3 rad. Its first call compiles about twice as long as
-# Dopri8's (17 s against 9.6 s on the loaded machine). With three or more bodies
-# Dopri8 stays: on the Pythagorean problem to t = 70 it took 66 ms (energy 1.6e-9)
-# against TimeTransformed(Yoshida4) at ds = 0.005, 818 ms (5.7e-12; KahanLi8's
-# round-off floor there is 4e-11, and no table reached 1e-12); on the outer solar
-# system to 2e4 days Dopri8 took 190 steps (energy 6e-10).
+# Measured with `benchmarks/tolerance_choice.py` (from pericentre, 100 saves at
+# apocentres, one pinned core of the loaded 2-core machine, fastest of five warm
+# runs, ratios within one run), e = 0.5 … 0.9999 at rtol = atol = 1e-8, 1e-10,
+# 1e-12: the energy stays at round-off (7e-15 … 2e-13 up to e = 0.999; 1.9e-12
+# at e = 0.9999, the float64 floor of pericentre passages at speed 141) against
+# Dopri8's 2e-10 … 3e-3; the mean anomaly errs 1e2 … 1e5 times less. Over 1000
+# periods it is quicker at every e and rtol: 1.2× (e = 0.5, 1e-8) to 2.7×
+# (e = 0.5, 1e-12) and 8.2× (e = 0.9999, 1e-12; 235 ms against 1.93 s). Over
+# 100 periods (~0.1 s) per-call costs decide: 0.35–1.6× Dopri8's speed, slower
+# in 8 of the 15 cases (most at 1e-8). Its first call compiles about twice as long (17 s against 9.6 s on
+# the loaded machine). With three or more bodies Dopri8 stays: on the Pythagorean
+# problem to t = 70, 41 ms (energy 1.6e-9) against TimeTransformed(Yoshida4) at
+# ds = 0.005, 488 ms (5.7e-12; KahanLi8's round-off floor there is 4e-11, and no
+# table reached 1e-12); on the outer solar system to 2e4 days Dopri8 takes 190
+# steps (energy 6e-10) and WisdomHolman is the method for long runs.
 
 
 def default_solver(
