@@ -7,6 +7,11 @@ escaper's two-body energy and the binary's; and Szebehely & Peters's outcome, th
 lightest body leaving on a hyperbolic orbit while the other two stay bound.
 """
 
+import json
+import subprocess
+import sys
+from pathlib import Path
+
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -98,3 +103,28 @@ def test_through_the_encounters_the_lightest_body_escapes():
     assert binary < 0
     binary_size = np.linalg.norm(np.asarray(traj.q[-1, 2] - traj.q[-1, 1]))
     assert binary_size < distance[-1] / 10
+
+
+@pytest.mark.integration  # the benchmark's --quick mode in a fresh process
+def test_the_benchmarks_quick_mode_keeps_the_invariants(tmp_path):
+    """`python -m benchmarks.close_encounters --quick` (to t = 30): every lagjax
+    row keeps the energy and both momenta, the extrapolated leapfrog to 1e-12,
+    and where REBOUND is installed all rows agree with IAS15 at t = 30."""
+    out = tmp_path / "close.json"
+    done = subprocess.run(
+        [sys.executable, "-m", "benchmarks.close_encounters", "--quick",
+         "--json", str(out)],
+        capture_output=True, text=True, cwd=Path(__file__).resolve().parent.parent,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-3000:]
+    rows = {row["method"]: row for row in json.loads(out.read_text())["rows"]}
+    ours = [row for name, row in rows.items() if name.startswith("TimeTransformed")]
+    assert len(ours) >= 4
+    for row in ours:
+        assert row["energy"] < 1e-10, row["method"]
+        assert row["momentum"] < 1e-11 and row["angular_momentum"] < 1e-11
+    extrapolated = [row for row in ours if "GBS" in row["method"]]
+    assert extrapolated and all(row["energy"] <= 1e-12 for row in extrapolated)
+    if "REBOUND IAS15" in rows:
+        for row in ours:
+            assert row["ias15_difference_at_30"] < 1e-6, row["method"]

@@ -2,11 +2,14 @@ r"""`simulate` with `lj.TimeTransformed`: equal fictitious steps, states at phys
 
 The splitting method steps the extended state $Y = ((p, p_t), (q, t))$ by equal
 fictitious steps $ds$ (`lagjax.solvers.time_transformed`); the physical time $t$ is
-part of the state. A save time $\tau$ is met without interpolation:
+part of the state. `GraggBulirschStoer` (`lagjax.solvers.extrapolation`) steps it
+by fictitious steps its error estimate chooses, starting from $ds$: a refused step
+leaves $Y$ where it was and is retried shorter. A save time $\tau$ is met without
+interpolation:
 
 1. the loop records, for each save time, the extended state $Y_n$ at the start of
-   the step that carries $t$ across it ($t_n \le \tau \le t_{n+1}$): one slot per
-   save time, written once, O(1) work per step;
+   the step that carries $t$ across it ($t_n \le \tau \le t_{n+1}$) and that
+   step's $ds$: one slot per save time, written once, O(1) work per step;
 2. after the loop, a partial step $\Phi_{\sigma\,ds}(Y_n)$ from each recorded
    state, with $\sigma \in [0, 1]$ solved by the secant method on
    $t(\Phi_{\sigma ds}(Y_n)) = \tau$ ($t(\sigma)$ is nearly linear, so a few
@@ -107,14 +110,17 @@ def run_time_transformed(
 
 
 class _Carry(NamedTuple):
-    """The loop's state: the extended state, the solver's, the step count, the
-    index of the first save time not yet passed, and the recorded start states
-    (one slot per save time, a spare that takes the unused writes, and one left
-    NaN for the saves never reached)."""
+    """The loop's state: the extended state, the solver's, the fictitious step,
+    the step and rejection counts, the index of the first save time not yet
+    passed, and the recorded (start state, step) pairs (one slot per save time, a
+    spare that takes the unused writes, and one left NaN for the saves never
+    reached)."""
 
     y: Any
     solver_state: Any
+    ds: jax.Array
     steps: jax.Array
+    rejected: jax.Array
     next_save: jax.Array
     slots: Any
 
@@ -134,23 +140,39 @@ def _compiled_run(system, y0, args, solver, t0, ds, save_ts, max_steps):
     zero = jnp.zeros((), ds.dtype)
 
     def step(carry: _Carry) -> _Carry:
-        y1, _, _, solver_state, _ = splitting.step(
-            terms, zero, ds, carry.y, args, carry.solver_state, False
+        y1, error, _, solver_state, _ = splitting.step(
+            terms, zero, carry.ds, carry.y, args, carry.solver_state, False
         )
+        if error is None:  # a splitting method: every step is taken, ds fixed
+            accepted, ds_next = True, carry.ds
+        else:  # the extrapolation: a refused step leaves y where it was
+            accepted, ds_next = splitting.adapt(carry.ds, carry.y, y1, error)
+            y1, solver_state = jax.tree_util.tree_map(
+                lambda new, old: jnp.where(accepted, new, old),
+                (y1, solver_state),
+                (carry.y, carry.solver_state),
+            )
         passed = jnp.searchsorted(save_ts, _time(y1), side="right")
-        # The start of a step that crosses save times goes to the first one's slot.
+        # The start of a step that crosses save times goes to the first one's slot;
+        # a refused step records nothing (at t0 it would pass a save time at t0).
+        passed = jnp.where(accepted, passed, carry.next_save)
         slot = jnp.where(passed > carry.next_save, carry.next_save, saves)
         slots = jax.tree_util.tree_map(
-            lambda buffer, x: buffer.at[slot].set(x), carry.slots, carry.y
+            lambda buffer, x: buffer.at[slot].set(x), carry.slots, (carry.y, carry.ds)
         )
-        return _Carry(y1, solver_state, carry.steps + 1, passed, slots)
+        return _Carry(
+            y1, solver_state, ds_next, carry.steps + 1,
+            carry.rejected + (1 - jnp.asarray(accepted, jnp.int32)), passed, slots,
+        )  # fmt: skip
 
     slots0 = jax.tree_util.tree_map(
-        lambda x: jnp.full((saves + 2, *jnp.shape(x)), jnp.nan, x.dtype), state0
+        lambda x: jnp.full((saves + 2, *jnp.shape(x)), jnp.nan, x.dtype), (state0, ds)
     )
     carry = _Carry(
         state0,
         splitting.init(terms, zero, ds, state0, args),
+        ds,
+        jnp.zeros((), jnp.int32),
         jnp.zeros((), jnp.int32),
         jnp.searchsorted(save_ts, t0, side="left").astype(jnp.int32),
         slots0,
@@ -165,15 +187,15 @@ def _compiled_run(system, y0, args, solver, t0, ds, save_ts, max_steps):
             moved = step(carry)
             done = carry.next_save >= saves
             kept = jax.tree_util.tree_map(
-                lambda a, b: jnp.where(done, a, b), carry[:4], moved[:4]
+                lambda a, b: jnp.where(done, a, b), carry[:6], moved[:6]
             )
             return _Carry(*kept, moved.slots), None  # pyright: ignore[reportCallIssue]
 
         carry, _ = lax.scan(frozen_step, carry, None, length=max_steps)
-    starts = _fill_forward(carry.slots, saves)
-    landed = jax.vmap(lambda y, tau: _partial_step(terms, splitting, y, tau, ds, args))(
-        starts, save_ts
-    )
+    starts, steps = _fill_forward(carry.slots, saves)
+    landed = jax.vmap(
+        lambda y, tau, ds: _partial_step(terms, splitting, y, tau, ds, args)
+    )(starts, save_ts, steps)
     (p, _), (q, t_landed) = landed
     reached = carry.next_save >= saves
     result = diffrax.RESULTS.where(
@@ -181,8 +203,8 @@ def _compiled_run(system, y0, args, solver, t0, ds, save_ts, max_steps):
     )
     stats = dict(
         num_steps=carry.steps,
-        num_accepted_steps=carry.steps,
-        num_rejected_steps=0 * carry.steps,
+        num_accepted_steps=carry.steps - carry.rejected,
+        num_rejected_steps=carry.rejected,
         time_residual=jnp.max(jnp.abs(t_landed - save_ts)),
         energy_start=-state0[0][1],
     )
@@ -201,7 +223,7 @@ def _fill_forward(slots: Any, saves: int) -> Any:
     """Slot k holds the start of the step that crosses save time k: where several
     save times fall in one step only the first slot was written; the others take
     the last written slot before them (NaN where none was: not reached)."""
-    written = ~jnp.isnan(_time(slots)[:saves])
+    written = ~jnp.isnan(_time(slots[0])[:saves])
     index = lax.cummax(jnp.where(written, jnp.arange(saves), -1))
     source = jnp.where(index >= 0, index, saves + 1)  # the never-written slot
     return jax.tree_util.tree_map(lambda buffer: buffer[source], slots)

@@ -67,6 +67,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from lagjax.solvers.extrapolation import GraggBulirschStoer
 from lagjax.solvers.splitting import AbstractSplittingSolver
 
 
@@ -102,12 +103,15 @@ class TimeTransformed(eqx.Module):
     **Arguments:**
 
     - `splitting`: any lagjax splitting solver (`StormerVerlet`, `Yoshida4`,
-      `BlanesMoan6`, `KahanLi8`, …); its kick and drift tables are used.
+      `BlanesMoan6`, `KahanLi8`, …), its kick and drift tables run at the fixed
+      step `dt`; or `GraggBulirschStoer(rtol=..., atol=...)`, the extrapolated
+      leapfrog, whose step starts at `dt` and then follows its error estimate
+      (`lagjax.solvers.extrapolation`).
     - `weight`: $w(x) > 0$ with $dt/ds = w(-V)$ on the solution; default
       $1/x$, the logarithmic Hamiltonian.
     """
 
-    splitting: AbstractSplittingSolver
+    splitting: AbstractSplittingSolver | GraggBulirschStoer
     weight: Callable[[Any], Any] = logarithmic_weight
 
     @property
@@ -115,10 +119,13 @@ class TimeTransformed(eqx.Module):
         return f"TimeTransformed({type(self.splitting).__name__})"
 
     def __check_init__(self):
-        if not isinstance(self.splitting, AbstractSplittingSolver):
+        if not isinstance(
+            self.splitting, (AbstractSplittingSolver, GraggBulirschStoer)
+        ):
             raise TypeError(
                 "TimeTransformed wraps a lagjax splitting solver (StormerVerlet, "
-                f"Yoshida4, BlanesMoan6, …); got {type(self.splitting).__name__}"
+                "Yoshida4, BlanesMoan6, …) or GraggBulirschStoer; got "
+                f"{type(self.splitting).__name__}"
             )
         if self.splitting.needs_quadratic_kinetic:
             raise ValueError(
