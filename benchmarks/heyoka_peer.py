@@ -5,7 +5,9 @@ Three columns on one pinned core: **heyoka** — the equations derived by heyoka
 itself (`heyoka.lagrangian`) and integrated by `taylor_adaptive` /
 `taylor_adaptive_batch`; **lagjax→heyoka** — the equations derived by lagjax
 (`lj.Lagrangian(L).acceleration`), their jaxpr translated into heyoka's expressions
-(`heyoka_integrate`); **lagjax Dopri8** — `lj.simulate` with `diffrax.Dopri8` at
+(`heyoka_integrate`); **lagjax Taylor (JAX)** — the JAX-native Taylor integrator
+(`lagjax.taylor.taylor_integrate`, jitted: its coefficients from the jaxpr, each
+order one matrix product, `lagjax.taylor.order_map`); **lagjax Dopri8** — `lj.simulate` with `diffrax.Dopri8` at
 rtol = atol = 1e-14, jitted; and **simulate(Taylor heyoka)** — what a user writes,
 `lj.simulate(lag, y0, solver=lj.Taylor(backend="heyoka"))`, checks and all. Cases,
 unit masses and rods, g = 9.81:
@@ -43,6 +45,8 @@ import numpy as np
 
 import lagjax as lj
 from benchmarks.scaling_size import n_link_pendulum_lagrangian
+from lagjax._core.cpu_loops import enable_fast_cpu_loops
+from lagjax.taylor import taylor_integrate
 from lagjax.taylor.heyoka_backend import heyoka_integrate, heyoka_integrate_batch
 from lagjax.taylor.heyoka_expressions import import_heyoka
 
@@ -194,12 +198,22 @@ def dopri8_row(case: str, chain: Chain, y0s, t1: float, exact) -> dict:
                exact)  # fmt: skip
 
 
+def jax_taylor_row(case: str, chain: Chain, y0, t1: float, tol: float, exact) -> dict:
+    """lagjax's JAX-native Taylor integrator, jitted, at `tol`."""
+    final = jax.jit(lambda y: taylor_integrate(chain.vector_field, y, 0.0, t1,
+                                               rtol=tol, atol=tol).ys[-1])  # fmt: skip
+    first_s, _ = timed(lambda: final(jnp.asarray(y0)))
+    return row(case, "lagjax Taylor (JAX)", tol, first_s,
+               lambda: final(jnp.asarray(y0)), exact)  # fmt: skip
+
+
 def single_case(config: dict) -> list[dict]:
     chain, t1 = Chain(2), config["single_t1"]
     y0 = np.array([0.5, 0.3, 0.0, 0.0])
     exact = reference(chain, y0, t1)
     rows = [r for tol in config["single_tols"]
-            for r in heyoka_rows("single", chain, y0, t1, tol, exact)]  # fmt: skip
+            for r in [*heyoka_rows("single", chain, y0, t1, tol, exact),
+                      jax_taylor_row("single", chain, y0, t1, tol, exact)]]  # fmt: skip
     return [*rows, dopri8_row("single", chain, y0, t1, exact)]
 
 
@@ -255,10 +269,10 @@ def chain_case(config: dict) -> list[dict]:
 
 def print_table(rows: list[dict]) -> None:
     print(
-        f"{'case':<12} {'route':<16} {'tol':>7} {'first call':>11} {'run':>11} {'error':>9}"
+        f"{'case':<12} {'route':<23} {'tol':>7} {'first call':>11} {'run':>11} {'error':>9}"
     )
     for r in rows:
-        print(f"{r['case']:<12} {r['route']:<16} {r['tol']:>7.0e} {r['first_s']:>10.3f}s "
+        print(f"{r['case']:<12} {r['route']:<23} {r['tol']:>7.0e} {r['first_s']:>10.3f}s "
               f"{r['run_s'] * 1e3:>9.2f}ms {r['error']:>9.1e}")  # fmt: skip
 
 
@@ -267,6 +281,7 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="short runs (CI check)")
     parser.add_argument("--json", help="write the rows to this path")
     options = parser.parse_args()
+    enable_fast_cpu_loops()  # before the first JAX computation
     jax.config.update("jax_enable_x64", True)
     os.sched_setaffinity(0, {0})  # one core (Linux)
     config = QUICK if options.quick else FULL

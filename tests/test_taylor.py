@@ -50,11 +50,16 @@ def _jet_coefficients(f, y0, order):
 
 
 @pytest.mark.integration  # compile-heavy: CI runs it in its integration step
-@pytest.mark.parametrize("unroll", [pytest.param(True, marks=pytest.mark.slow), False])
-def test_coefficients_match_jet_and_nested_jvp(unroll):
+@pytest.mark.parametrize(
+    "unroll, scalar",
+    [pytest.param(True, False, marks=pytest.mark.slow), (False, False), (False, True)],
+)
+def test_coefficients_match_jet_and_nested_jvp(unroll, scalar):
     f = lambda y: double_pendulum(0.0, y, None)
     coefficients = jax.jit(
-        lambda y0: taylor_coefficients(double_pendulum, 0.0, y0, order=6, unroll=unroll)
+        lambda y0: taylor_coefficients(
+            double_pendulum, 0.0, y0, order=6, unroll=unroll, scalar=scalar
+        )
     )
     ours = coefficients(Y0)
     # order 6: jet's nested series compile in seconds (order 8 took most of a minute)
@@ -89,8 +94,20 @@ def _many_primitives(t, y, args):
 
 
 def test_coefficients_of_every_rule_match_nested_jvp():
+    from lagjax.taylor.coefficients import lower_vector_field
+    from lagjax.taylor.order_map import fits
+    from lagjax.taylor.tape import supports
+
     y0 = jnp.array([0.7, -0.4])
     ours = jax.jit(lambda y: taylor_coefficients(_many_primitives, 0.0, y, order=5))(y0)
+    # The scalar graph of one trajectory: every order one product by A (order_map).
+    graph, _ = lower_vector_field(_many_primitives, 0.0, y0, None, scalar=True)
+    assert graph.scalar and supports(graph) and fits(graph)
+    by_order_map = jax.jit(
+        lambda y: taylor_coefficients(
+            _many_primitives, 0.0, y, order=5, unroll=False, scalar=True
+        )
+    )(y0)
 
     # Time enters explicitly: extend the state with t to use the autonomous reference.
     def extended(z):
@@ -99,6 +116,7 @@ def test_coefficients_of_every_rule_match_nested_jvp():
     z0 = jnp.concatenate([y0, jnp.zeros(1)])
     reference = jax.jit(lambda z: lie_coefficients(extended, z, 5))(z0)
     assert jnp.allclose(ours, reference[:, :2], rtol=1e-12, atol=1e-13)
+    assert jnp.allclose(by_order_map, reference[:, :2], rtol=1e-12, atol=1e-13)
 
 
 def test_unsupported_primitive_is_refused_by_name():

@@ -52,7 +52,7 @@ from .graph import Graph
 
 # Which sums each rule needs: (x, y, j-weighted) with x, y naming an input ("i0",
 # "i1") or an output ("o0", "o1") of the operation; the sum is Σ_{j=1}^{k−1} xⱼ yₖ₋ⱼ.
-_TERMS: dict[type, tuple] = {
+TERMS: dict[type, tuple] = {
     rec.Product: (("i0", "i1", False),),
     rec.Quotient: (("i1", "o0", False),),
     rec.Exp: (("i0", "o0", True),),
@@ -71,7 +71,7 @@ def supports(graph: Graph) -> bool:
     for op in graph.ops:
         if op.outs[0] not in graph.series:
             continue
-        if not isinstance(op.rule, (*_LINEAR, *_TERMS)):
+        if not isinstance(op.rule, (*_LINEAR, *TERMS)):
             return False
         if isinstance(op.rule, rec.Product) and op.rule.primitive.name != "mul":
             return False
@@ -95,7 +95,7 @@ def _layout(graph: Graph) -> _Layout:
     rows = {v: r for r, v in enumerate(dict.fromkeys(ordered))}
     terms, first = [], {}
     for index, op in enumerate(graph.ops):
-        spec = _TERMS.get(type(op.rule), ())
+        spec = TERMS.get(type(op.rule), ())
         if op.outs[0] in graph.series and spec:
             first[index] = len(terms)
             for x, y, weighted in spec:
@@ -117,7 +117,7 @@ def _inner_sums(tape: jax.Array, k: Any, layout: _Layout, size: int) -> jax.Arra
     return jnp.stack(sums)
 
 
-def _finish(rule: Any, k: Any, s: list, now: list, zi: list, zo: list) -> tuple:
+def finish(rule: Any, k: Any, s: list, now: list, zi: list, zo: list) -> tuple:
     """The outputs' k-th coefficients from the inner sums `s`, the inputs' k-th
     coefficients `now` and the order-0 inputs `zi` and outputs `zo`."""
     kind = type(rule)
@@ -186,14 +186,14 @@ def tape_coefficients(
             if op.outs[0] not in graph.series:
                 continue
             start = layout.first_term.get(index, 0)
-            count = len(_TERMS.get(type(op.rule), ()))
+            count = len(TERMS.get(type(op.rule), ()))
             zi = [full(values[i]) for i in op.ins]
             current = [
                 now[i] if i in graph.series else jnp.zeros_like(z)
                 for i, z in zip(op.ins, zi)
             ]
             zo = [full(values[o]) for o in op.outs]
-            new = _finish(op.rule, kf, [sums[start + i] for i in range(count)],
+            new = finish(op.rule, kf, [sums[start + i] for i in range(count)],
                           current, zi, zo)  # fmt: skip
             now.update(zip(op.outs, (real(c) for c in new)))
         row = jnp.stack([now.get(v, real(0.0)) for v in layout.rows])
