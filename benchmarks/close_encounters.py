@@ -40,6 +40,11 @@ time here is inflated, heyoka's 15× over its quiet 3–4 ms; read the ratios):
 | REBOUND IAS15 | 160 ms | 2.7 | 9.9e-11 | 0 |
 | heyoka tol = 1e-16 | 59 ms | 1 | 1.4e-9 | 5.5e-8 |
 
+Per step (`TimeTransformed(Yoshida4)`, ds = 0.005, the same 388,118 steps, one
+run): the library 1.39 µs, its hand-written twin 0.57 µs (2.5×), plain
+`Yoshida4` in t 0.80 µs. Neither the saves (one save or 71: the same time) nor
+the kick's ∂V/∂t (≤ 10 %) explain the gap; it is open.
+
 Every row keeps |P| and |L| below 1e-12 and sees the lightest body escape
 (E_rel ≈ +5.28). The extrapolation's energy error is set by round-off at the
 encounters, which the tableau's weights multiply: the harmonic sequences
@@ -158,7 +163,8 @@ def twin_run(scene, t1: float, ds: float) -> Callable:
     @jax.jit
     def run_to_end(q0):
         binding, _ = binding_and_gradient(q0)
-        state = (q0, 0.0 * binding, jnp.zeros_like(q0), -binding,
+        # At rest: p_t = −E = U(q0).
+        state = (q0, 0.0 * binding, jnp.zeros_like(q0), binding,
                  (jnp.zeros_like(q0), 0.0 * binding, jnp.zeros_like(q0)))  # fmt: skip
         done = lax.while_loop(lambda c: c[0][1] < t1, lambda c: (step(c[0]), c[1] + 1),
                               (state, 0))  # fmt: skip

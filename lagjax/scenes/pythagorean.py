@@ -81,7 +81,7 @@ class PythagoreanThreeBody(AbstractScene):
     closest separation): `TimeTransformed(Yoshida4())` at ds = 0.005 keeps the
     energy to ~2e-13 to t = 70 in about 390,000 steps;
     `TimeTransformed(GraggBulirschStoer(rtol=1e-13, atol=1e-13))`, the extrapolated
-    leapfrog, to ~5e-13 in about 3,400 steps, 5–8 times faster
+    leapfrog, to ~5e-13 in about 3,400 steps, about 5 times faster
     (`benchmarks/close_encounters.py`).
     """
 
