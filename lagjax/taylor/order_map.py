@@ -57,9 +57,10 @@ import numpy as np
 from .graph import Graph
 from .tape import TERMS, finish
 
-# Above this many entries of A, its product per order outweighs the sequential
-# pass it replaces (that pass is O(operations), the product O(slots × sources)).
-MAX_MATRIX_ENTRIES = 64 * 64
+# Above this many entries of A, its product per order (O(slots × sources)) may
+# outweigh the sequential pass it replaces (O(operations)). Measured: the
+# lagjax-derived double pendulum, A 112 × 58, runs 1.3× faster than the tape.
+MAX_MATRIX_ENTRIES = 128 * 128
 
 
 class _Plan(NamedTuple):
