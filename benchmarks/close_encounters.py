@@ -42,8 +42,11 @@ time here is inflated, heyoka's 15× over its quiet 3–4 ms; read the ratios):
 
 Per step (`TimeTransformed(Yoshida4)`, ds = 0.005, the same 388,118 steps, one
 run): the library 1.39 µs, its hand-written twin 0.57 µs (2.5×), plain
-`Yoshida4` in t 0.80 µs. Neither the saves (one save or 71: the same time) nor
-the kick's ∂V/∂t (≤ 10 %) explain the gap; it is open.
+`Yoshida4` in t 0.80 µs. Interleaved runs put the time transformation (extended
+state, weights, run loop) at 10–25 % over plain `Yoshida4` (0.84–1.0 against
+0.70–0.80 µs); the saves (one or 71: the same time) and the kick's ∂V/∂t (≤ 10 %)
+are not it. The rest of the gap is shared with plain `Yoshida4`: the splitting
+engine and the autodiff force (`pair_energy`) against the twin's hand-written one.
 
 Every row keeps |P| and |L| below 1e-12 and sees the lightest body escape
 (E_rel ≈ +5.28). The extrapolation's energy error is set by round-off at the
