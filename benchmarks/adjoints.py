@@ -62,7 +62,9 @@ between processes) and 2.5–2.6× for Yoshida4, with the default checkpoints
 that summed each block of 4–8 steps' cotangent increments plainly and
 compensated once per block cut XLA's kernels per Störmer–Verlet step from 16.8
 to 14.1, but the fused kernels recomputed shared values (+47% elementwise
-operations): 4.5×, so it was dropped. The backward step is one force and one
+operations): 4.5×, so it was dropped; unrolling the walk back 2× or 4× more
+than the forward loop gained nothing either (Yoshida4 2.51× → 2.81×, 2.53×;
+Störmer–Verlet 2.69× → 2.72×, 2.71×, in one process). The backward step is one force and one
 transposed force per stage (Kepler: 37.5 kernels per Yoshida4 step back, 18.5
 forward); the rest is bookkeeping.
 

@@ -126,3 +126,24 @@ def test_marks_keep_the_saves_and_space_the_checkpoints():
         2000,
         2500,
     ]
+
+
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
+def test_saves_on_the_grid_with_irregular_checkpoints():
+    # Saves every 7 steps (a prime) with checkpoints every 5: no divisor of 7
+    # near 5, so the marks are the saves and every 5th step, irregular.
+    system, y0, mu = _kepler()
+    ts = 0.07 * np.arange(1, 15)
+
+    def loss(adjoint):
+        def value(y0, mu):
+            run = lj.simulate(system, y0, t1=1.0, dt=0.01, ts=ts, solver=lj.Yoshida4(),
+                              args=mu, adjoint=adjoint)  # fmt: skip
+            return jnp.sum(jnp.sin(run.ys[0])) + 0.3 * jnp.sum(run.ys[1] ** 2)
+
+        return value
+
+    assert _marks([7 * i for i in range(1, 15)], 5).gaps is not None
+    expected = jax.grad(loss(None), argnums=(0, 1))(y0, mu)
+    actual = jax.grad(loss(lj.ReversibleAdjoint(checkpoints=5)), argnums=(0, 1))(y0, mu)
+    assert _relative_gap(actual, expected) < 1e-12
