@@ -28,7 +28,10 @@ point, c̄ − c̄). The guesses of the implicit methods' stage solves are
 differentiated implicitly by optimistix (zero derivative), so a step back that
 starts its solve from a worse guess changes nothing but the iteration count.
 
-Marks are uniform: `lead` steps to mark 0, then `every` steps between marks.
+Marks are uniform — `lead` steps to mark 0, then `every` steps between marks,
+loops of static length unrolled as the forward loop is — or irregular (`Marks.at`:
+off-grid saves, checkpoints around saves with no divisor near their spacing),
+loops of traced length (`reversible_steps`).
 
 Two walks share this loop. The splittings walk back stage by stage
 (`reversible_splitting`): one linearization per stage serves both the step back
