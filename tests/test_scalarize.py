@@ -69,6 +69,31 @@ def vector_free_double_pendulum(q, qd):
     )
 
 
+def test_summed_cotangents_of_a_gradient_are_scalarized():
+    """A gradient's jaxpr sums the cotangents of a reused value with `add_any`
+    (the n-link chain's equations have it): the scalar path keeps it."""
+
+    def force(q):
+        return jax.grad(lambda x: jnp.sin(x[0]) * x[0] + x[0] * x[1] ** 2)(q)
+
+    q = jnp.array([0.7, -0.4])
+    assert "add_any" in str(jax.make_jaxpr(force)(q))
+    twin = scalarize(force, q)
+    assert twin is not None
+    value = np.array(twin(as_object_array(q)), dtype=float)
+    exact = [np.cos(0.7) * 0.7 + np.sin(0.7) + 0.16, 2 * 0.7 * -0.4]
+    assert relative_close(value, np.array(exact), 1e-14)
+
+
+@pytest.mark.parametrize("config", [((1, 0, 0), (0, 2, 1)), ((-1, 1, 2), (2, -1, 0))])
+def test_pad_with_interior_and_cropping_is_lax_pad(config):
+    x = jnp.arange(1.0, 7.0).reshape(2, 3)
+    twin = scalarize(lambda x: jax.lax.pad(x, -5.0, config), x)
+    assert twin is not None
+    value = np.array(twin(as_object_array(x)), dtype=float)
+    assert np.array_equal(value, np.asarray(jax.lax.pad(x, -5.0, config)))
+
+
 def test_unsupported_primitive_falls_back():
     assert scalarize(lambda q: jnp.sort(q)[0], jnp.ones(3)) is None
     assert scalarize(lambda q: jnp.sum(q**2), jnp.ones(500)) is None

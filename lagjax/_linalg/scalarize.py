@@ -40,6 +40,7 @@ _ELEMENTWISE = frozenset(
         "acos",
         "acosh",
         "add",
+        "add_any",  # the sum of cotangents in a transposed (grad) jaxpr
         "and",
         "asin",
         "asinh",
@@ -105,6 +106,7 @@ _STRUCTURAL = frozenset(
         "cumprod",
         "cumsum",
         "dot_general",
+        "pad",  # a gradient places each cotangent in a zero array with it
         "reduce_max",
         "reduce_min",
         "reduce_prod",
@@ -232,6 +234,25 @@ def _broadcast_in_dim(
     return np.broadcast_to(operand.reshape(expanded), shape)
 
 
+def _pad(operand: np.ndarray, value: Any, config: Sequence[tuple]) -> np.ndarray:
+    """`lax.pad`: per axis, `interior` copies of `value` between elements, then
+    `low` and `high` at the ends (negative: that many elements cropped)."""
+    out = operand
+    for axis, (low, high, interior) in enumerate(config):
+        moved = np.moveaxis(out, axis, 0)
+        rest = moved.shape[1:]
+        spaced = np.full((max(len(moved) * (interior + 1) - interior, 0), *rest),
+                         value, dtype=object)  # fmt: skip
+        spaced[:: interior + 1] = moved
+        ends = [
+            np.full((max(pad, 0), *rest), value, dtype=object) for pad in (low, high)
+        ]
+        full = np.concatenate([ends[0], spaced, ends[1]])
+        full = full[max(-low, 0) : len(full) - max(-high, 0)]
+        out = np.moveaxis(full, 0, axis)
+    return out
+
+
 def _structural(eqn: Any, operands: list[np.ndarray]) -> Any:
     name, params = eqn.primitive.name, eqn.params
     if name == "broadcast_in_dim":
@@ -264,6 +285,8 @@ def _structural(eqn: Any, operands: list[np.ndarray]) -> Any:
         axis = params["axis"]
         parts = np.split(operands[0], operands[0].shape[axis], axis=axis)
         return [np.squeeze(part, axis=axis) for part in parts]  # arrays, even 0-d
+    if name == "pad":
+        return _pad(operands[0], operands[1].item(), params["padding_config"])
     if name == "dot_general":
         return _dot_general(operands[0], operands[1], params["dimension_numbers"])
     if name in _CUMULATIVE:
