@@ -98,7 +98,8 @@ def scan_saving(
             # cannot lay out its loops; `ts=` reaches it static.
             return None
         try:
-            times = np.asarray(sub.ts, dtype=float)
+            # `ts` itself: SubSaveAt makes it a JAX array, traced under a jit.
+            times = np.asarray(ts, dtype=float)
         except jax.errors.TracerArrayConversionError:
             return None
         if not dense:
