@@ -23,7 +23,10 @@ $y_{k_j}$ (a splitting's first force, say): both agree in value, and only the
 latter is a function of $y_{k_j}$ and θ. The marks are irregular (the brackets'
 spacing is whatever the save times make it), so the loops between them take
 traced lengths (`reversible_steps`). The run ends at the last bracket, as the
-plain scan's does.
+plain scan's does. Kepler, 10⁵ Yoshida4 steps, 10 saves off the grid, under
+`jax.jit`: the gradient takes 2.05× the forward run and 19 KiB of temporaries,
+where the plain scan's takes 6.7× and 44 MiB, and agrees with it to 6.6e-12
+(process CPU time on one core of a loaded machine, minima of 15).
 
 Dense output (`dense=True`) keeps every step's dense information, one state's
 worth per step: there is no memory for a reversible adjoint to save, and it is
