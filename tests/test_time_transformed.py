@@ -217,3 +217,44 @@ def test_refusals_name_the_problem():
         lj.TimeTransformed(lj.BlanesMoanNystrom6())
     with pytest.raises(ValueError, match="dense"):
         lj.simulate(kepler(), y0, t1=1.0, dt=0.05, solver=solver, dense=True)
+
+
+def test_simulates_tolerances_are_refused_not_ignored():
+    y0 = pericentre_state(0.5)
+    for solver in (lj.TimeTransformed(lj.Yoshida4()),
+                   lj.TimeTransformed(lj.GraggBulirschStoer())):  # fmt: skip
+        with pytest.raises(ValueError, match=r"takes no rtol from simulate.*"
+                           r"GraggBulirschStoer\(rtol="):  # fmt: skip
+            lj.simulate(kepler(), y0, t1=1.0, dt=0.05, solver=solver, rtol=1e-10)
+
+
+def slow_far_kepler(mu: float = 2.96e-4, r: float = 5.0):
+    """A circular orbit in AU and days (the Sun's GM): w(−V) = r/μ ≈ 1.7e4, so a
+    fictitious step ds = 1e-3 is a physical step of about 17 days."""
+    system = lj.SeparableHamiltonian(
+        lambda p: p @ p / 2, lambda q: -mu / jnp.sqrt(q @ q)
+    )
+    return system, (jnp.array([r, 0.0]), jnp.array([0.0, np.sqrt(mu / r)]))
+
+
+def test_step_count_is_judged_from_the_physical_step():
+    system, y0 = slow_far_kepler()
+    solver = lj.TimeTransformed(lj.Yoshida4())
+    with pytest.raises(ValueError, match=r"physical step of 1\.689\d*e-05"):
+        lj.simulate(system, y0, t1=1e6, dt=1e-9, solver=solver)  # 6e10 steps
+
+
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
+def test_a_small_fictitious_step_in_days_runs():
+    """1e6 days at ds = 1e-3: 10⁹ fictitious units of t, 6·10⁴ steps (refused
+    when the span was divided by ds as if it were dt)."""
+    system, y0 = slow_far_kepler()
+    period = 2 * np.pi * np.sqrt(5.0**3 / 2.96e-4)  # about 4083 days
+    run = lj.simulate(system, y0, t1=1e6, dt=1e-3,
+                      solver=lj.TimeTransformed(lj.Yoshida4()))  # fmt: skip
+    radius = float(jnp.linalg.norm(run.q[-1]))
+    angle = float(jnp.arctan2(run.q[-1][1], run.q[-1][0]))
+    expected = float(np.angle(np.exp(2j * np.pi * 1e6 / period)))
+    # The orbit's shape is exact (the logarithmic Hamiltonian); its timing is
+    # Yoshida4's at about 240 steps per orbit, over 245 orbits.
+    assert abs(radius - 5.0) < 1e-9 and abs(angle - expected) < 1e-4

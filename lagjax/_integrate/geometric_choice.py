@@ -51,8 +51,9 @@ SAFETY = 2.0
 # Kepler orbits, e = 0.5 … 0.9999 (1.2–8×), at round-off energy against Dopri8's
 # 2e-10 … 3e-3 (`lagjax._integrate.solver_choice` has the figures).
 GEOMETRIC_RTOL = 1e-7
-# The time-transformed run checks ds against the span as if it were dt (more than
-# 1e9 steps: refused); ds is an action, tiny in units where |E| is (AU, days).
+# Beyond this many steps Dopri8 stays (it would take as long). On a Kepler orbit
+# s advances by ∫(−V)dt = 2|E|·t (the virial theorem), so a run takes about
+# span·2|E|/ds steps, whatever the units (ds is tiny in AU and days).
 MAX_SPAN_IN_STEPS = 1e8
 
 
@@ -90,8 +91,8 @@ def geometric_default(
         return None  # unbound or undefined: the rule is calibrated on ellipses
     ds = fictitious_step(rtol, energy, tau)
     span = (system.default_span()[0] if t1 is None else t1) - t0
-    if not span / ds < MAX_SPAN_IN_STEPS:
-        return None  # refused by the run's span check, which reads ds as a dt
+    if not span * 2 * abs(energy) / ds < MAX_SPAN_IN_STEPS:
+        return None
     return TimeTransformed(KahanLi8()), ds
 
 

@@ -74,7 +74,10 @@ from lagjax._integrate.step_control import (
     with_implicit_tolerances,
 )
 from lagjax._integrate.taylor_run import run_taylor
-from lagjax._integrate.time_transformed_run import run_time_transformed
+from lagjax._integrate.time_transformed_run import (
+    check_no_tolerances_for,
+    run_time_transformed,
+)
 from lagjax._integrate.wisdom_holman_run import run_wisdom_holman
 from lagjax.solvers.time_transformed import TimeTransformed
 from lagjax.solvers.wisdom_holman import WisdomHolman
@@ -162,6 +165,7 @@ def simulate(
     # solves there, silently).
     tolerance_run = solver is None and (rtol is not None or atol is not None)
     check_save_choice(ts, saveat)  # before the Taylor and time-transformed routes
+    given_tolerances = {"rtol": rtol, "atol": atol}
     rtol = DEFAULT_TOLERANCE if rtol is None else rtol
     atol = DEFAULT_TOLERANCE if atol is None else atol
     options = (saveat, adjoint, event, stepsize_controller, progress_meter)
@@ -190,6 +194,7 @@ def simulate(
                                  stepsize_controller=stepsize_controller,
                                  progress_meter=progress_meter)  # fmt: skip
     if isinstance(solver, TimeTransformed):  # dt is the fictitious step ds
+        check_no_tolerances_for(solver, given_tolerances)
         return run_time_transformed(system, y0, t0, t1, dt, solver, ts, args,
                                     max_steps, throw, saveat=saveat, adjoint=adjoint,
                                     dense=dense, event=event, progress=progress,

@@ -43,7 +43,7 @@ import numpy as np
 from jax.core import Tracer
 
 from lagjax._core.precision import cast_floats, working_dtype
-from lagjax._integrate.checks.inputs import check_simulate_inputs
+from lagjax._integrate.checks.inputs import MAX_FIXED_STEPS, check_simulate_inputs
 from lagjax.solvers.time_transformed import (
     TimeTransformed,
     extended_state,
@@ -73,8 +73,9 @@ def run_time_transformed(
         raise ValueError(f"the fictitious step ds (dt) must be positive; got {ds}")
     if t1 is None:
         t1 = system.default_span()[0]
-    # ds stands in for dt: positive, pointing to t1, resolvable at the times' scale.
-    y0 = check_simulate_inputs(system, y0, t0, t1, ds, None, ts, args, max_steps)
+    # ds is no time step (dt = w·ds): the times are checked as an adaptive run's,
+    # the number of steps below, from the physical step at the start.
+    y0 = check_simulate_inputs(system, y0, t0, t1, None, None, ts, args, max_steps)
     if not isinstance(t1, Tracer) and not float(t1) > float(t0):
         raise ValueError(f"{solver.name} integrates forward: t1 must exceed t0")
     system, args = system.resolve(args)
@@ -92,6 +93,7 @@ def run_time_transformed(
             "start; it must be positive and finite (the logarithmic Hamiltonian "
             "needs V(q0) < 0, an attractive potential that vanishes at infinity)"
         )
+    _check_step_count(solver, t0, t1, ds, weight0)
     save_ts = jnp.reshape(jnp.asarray(t1 if ts is None else ts, dtype=dtype), (-1,))
     trajectory = _compiled_run(
         integrated, y0, args, solver, jnp.asarray(t0, dtype), jnp.asarray(ds, dtype),
@@ -107,6 +109,38 @@ def run_time_transformed(
             "or the weight dt/ds was not positive at the start",
         )
     return trajectory
+
+
+def check_no_tolerances_for(solver: TimeTransformed, given: dict[str, Any]) -> None:
+    """Refuse `simulate`'s rtol/atol with a `TimeTransformed` solver: its steps are
+    the fictitious step dt, and an extrapolating inner solver carries its own
+    tolerances; taken here they would be ignored without a word."""
+    names = [name for name, value in given.items() if value is not None]
+    if names:
+        raise ValueError(
+            f"{solver.name} takes no {' or '.join(names)} from simulate: a splitting "
+            "table steps by the fictitious step dt, and an extrapolating one has its "
+            "own, e.g. lj.TimeTransformed(lj.GraggBulirschStoer(rtol=1e-13, "
+            "atol=1e-13)). Or pass no solver: a tolerance run of a gravitating "
+            "two-body scene picks a time-transformed method itself"
+        )
+
+
+def _check_step_count(solver: TimeTransformed, t0: Any, t1: Any, ds: Any,
+                      weight0: Any) -> None:  # fmt: skip
+    """Refuse a fictitious step that would take ≥ 10⁹ steps at the start's pace
+    dt = w(−V₀)·ds (in days and AU, ds = 1e-6 is a step of a few days)."""
+    values = (t0, t1, ds, weight0)
+    if any(isinstance(value, Tracer) for value in values):
+        return
+    steps = (float(t1) - float(t0)) / (float(ds) * float(weight0))
+    if steps > MAX_FIXED_STEPS:
+        raise ValueError(
+            f"{solver.name}: ds = {float(ds):g} is a physical step of "
+            f"{float(ds) * float(weight0):g} at the start (dt = w(−V)·ds), so "
+            f"[{float(t0):g}, {float(t1):g}] would take about {steps:.3g} steps, "
+            f"more than {MAX_FIXED_STEPS:.0e}: pass a larger dt (the fictitious step)"
+        )
 
 
 class _Carry(NamedTuple):
