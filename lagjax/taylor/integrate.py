@@ -206,14 +206,7 @@ def taylor_integrate(
     def body(c: _Carry) -> _Carry:
         coeffs = graph_coefficients(graph, c.t, c.y, leaves, p, unroll=unroll)
         h = jax.lax.stop_gradient(step_size(coeffs, rtol, atol))
-        # Time in double-length arithmetic (as heyoka): a rounding error in t
-        # of a few ulps per step would otherwise move the end of a long run.
-        remaining = direction * ((t1 - c.t) - c.t_low)
-        last = h >= jax.lax.stop_gradient(remaining)
-        tau = direction * jnp.where(last, remaining, h)
-        t_sum, t_err = two_sum(c.t, tau)
-        t_high, t_low = two_sum(t_sum, c.t_low + t_err)
-        t_new = jnp.where(last, t1, t_high)
+        tau, t_new, t_low, last = _advance_time(c.t, c.t_low, h, t1, direction)
         y_new = horner(coeffs, tau)
         ok = jnp.all(jnp.isfinite(y_new))
         ys, index = save(coeffs, c.t, c.t_low, t_new, c.ys, c.index, ok)
@@ -238,17 +231,11 @@ def taylor_integrate(
         going = (c.t != t1) & (c.result == RESULTS.successful)
         return going if c.watch is None else going & ~jnp.any(c.watch.fired)
 
-    at_start = direction * (ts - t0) <= 0
     init = _Carry(
         t=t0,
         t_low=jnp.zeros_like(t0),
         y=y0,
-        ys=jnp.where(
-            at_start[:, None],
-            y0,
-            jnp.nan * jnp.ones((ts.shape[0], *y0.shape), y0.dtype),
-        ),
-        index=jnp.sum(at_start),
+        **_saves_at_start(ts, t0, y0, direction),
         num_steps=jnp.array(0),
         result=RESULTS.successful,  # pyright: ignore[reportArgumentType]
         watch=None
@@ -264,17 +251,8 @@ def taylor_integrate(
         kind="lax" if forward_mode else "checkpointed",
         buffers=_buffers(ts.shape[0] > SMALL_SAVES, dense),
     )
-    stopped = (final.t != t1) & (final.result == RESULTS.successful)
-    if final.watch is not None:  # an event ends a run early, successfully
-        stopped = stopped & ~jnp.any(final.watch.fired)
-    result = RESULTS.where(
-        stopped,
-        RESULTS.max_steps_reached,  # pyright: ignore[reportArgumentType]
-        final.result,
-    )
-    solution = TaylorSolution(
-        ts=ts, ys=final.ys, num_steps=final.num_steps, result=result, order=p
-    )
+    solution = TaylorSolution(ts=ts, ys=final.ys, num_steps=final.num_steps,
+                              result=_final_result(final, t1), order=p)  # fmt: skip
     end = t1
     if event is not None:
         assert final.watch is not None
@@ -284,6 +262,43 @@ def taylor_integrate(
     if final.dense is not None:
         solution = _with_dense(solution, final, t0, t1, end, direction)
     return solution
+
+
+def _advance_time(
+    t: jax.Array, t_low: jax.Array, h: jax.Array, t1: jax.Array, direction: jax.Array
+) -> tuple[jax.Array, jax.Array, jax.Array, jax.Array]:
+    """`(tau, t_new, t_low_new, last)`: a step of `h` towards `t1`, the last one
+    cut to land on it. Time is kept in double-length arithmetic (t + t_low, as
+    heyoka): a rounding error in t of a few ulps per step would otherwise move
+    the end of a long run."""
+    remaining = direction * ((t1 - t) - t_low)
+    last = h >= jax.lax.stop_gradient(remaining)
+    tau = direction * jnp.where(last, remaining, h)
+    t_sum, t_err = two_sum(t, tau)
+    t_high, t_low_new = two_sum(t_sum, t_low + t_err)
+    return tau, jnp.where(last, t1, t_high), t_low_new, last
+
+
+def _saves_at_start(ts: jax.Array, t0: jax.Array, y0: jax.Array, direction) -> dict:
+    """The save slots (y0 at the save times at or before t0, NaN for the rest)
+    and the index of the first save still ahead."""
+    at_start = direction * (ts - t0) <= 0
+    unreached = jnp.nan * jnp.ones((ts.shape[0], *y0.shape), y0.dtype)
+    return dict(ys=jnp.where(at_start[:, None], y0, unreached),
+                index=jnp.sum(at_start))  # fmt: skip
+
+
+def _final_result(final: _Carry, t1: jax.Array) -> Any:
+    """The loop's result code: `max_steps_reached` for a run that stopped short
+    of t1 without a failure or an event (which ends a run early, successfully)."""
+    stopped = (final.t != t1) & (final.result == RESULTS.successful)
+    if final.watch is not None:
+        stopped = stopped & ~jnp.any(final.watch.fired)
+    return RESULTS.where(
+        stopped,
+        RESULTS.max_steps_reached,  # pyright: ignore[reportArgumentType]
+        final.result,
+    )
 
 
 def _with_dense(
