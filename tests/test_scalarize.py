@@ -94,6 +94,21 @@ def test_pad_with_interior_and_cropping_is_lax_pad(config):
     assert np.array_equal(value, np.asarray(jax.lax.pad(x, -5.0, config)))
 
 
+def test_pad_with_a_traced_padding_value():
+    """The padding value may be a tracer (the FPU chain's potential force under
+    `jit`), which an object array must hold as it is."""
+    config = ((1, 1, 1),)
+
+    def padded(x):
+        return jax.lax.pad(x, x[0] * 2.0, config)
+
+    x = jnp.array([1.0, 2.0, 3.0])
+    twin = scalarize(padded, x)
+    assert twin is not None
+    value = jax.jit(lambda x: jnp.stack(list(twin(as_object_array(x)))))(x)
+    assert np.array_equal(np.asarray(value), np.asarray(padded(x)))
+
+
 def test_unsupported_primitive_falls_back():
     assert scalarize(lambda q: jnp.sort(q)[0], jnp.ones(3)) is None
     assert scalarize(lambda q: jnp.sum(q**2), jnp.ones(500)) is None

@@ -241,15 +241,22 @@ def _pad(operand: np.ndarray, value: Any, config: Sequence[tuple]) -> np.ndarray
     for axis, (low, high, interior) in enumerate(config):
         moved = np.moveaxis(out, axis, 0)
         rest = moved.shape[1:]
-        spaced = np.full((max(len(moved) * (interior + 1) - interior, 0), *rest),
-                         value, dtype=object)  # fmt: skip
+        size = max(len(moved) * (interior + 1) - interior, 0)
+        spaced = _filled((size, *rest), value)
         spaced[:: interior + 1] = moved
-        ends = [
-            np.full((max(pad, 0), *rest), value, dtype=object) for pad in (low, high)
-        ]
+        ends = [_filled((max(pad, 0), *rest), value) for pad in (low, high)]
         full = np.concatenate([ends[0], spaced, ends[1]])
         full = full[max(-low, 0) : len(full) - max(-high, 0)]
         out = np.moveaxis(full, 0, axis)
+    return out
+
+
+def _filled(shape: tuple, value: Any) -> np.ndarray:
+    """An object array of `shape` holding `value` (a traced scalar too, which
+    `np.full` would try to convert to a number)."""
+    out = np.empty(shape, dtype=object)
+    for index in np.ndindex(*shape):
+        out[index] = value
     return out
 
 
