@@ -16,15 +16,7 @@ import pytest
 import lagjax as lj
 from lagjax._integrate.reversible_adjoint import ROUND_OFF_SPACING, _marks
 from lagjax._integrate.reversible_off_grid import off_grid_marks
-
-
-def _kepler():
-    def potential(q, t, mu):
-        return -mu / jnp.sqrt(jnp.sum(q**2))
-
-    system = lj.SeparableHamiltonian(lambda p: 0.5 * jnp.sum(p**2), potential)
-    y0 = (jnp.array([1.0, 0.0]), jnp.array([0.0, 1.2]))
-    return system, y0, jnp.asarray(1.0)
+from tests.test_reversible_adjoint import _kepler
 
 
 def _relative_gap(a, b) -> float:
