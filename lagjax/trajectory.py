@@ -88,10 +88,14 @@ class Trajectory(eqx.Module):
 
     @property
     def qdot(self) -> Any:
+        if not self.is_hamiltonian:  # the state holds q̇: no eager vmap (~1 ms)
+            return self.ys[1]
         return self._along(self.system.state_velocity)
 
     @property
     def p(self) -> Any:
+        if self.is_hamiltonian:  # the state holds p
+            return self.ys[1]
         return self._along(self.system.state_momentum)
 
     def energy(self) -> jax.Array:

@@ -73,7 +73,7 @@ from lagjax._integrate.step_control import (
     defaults,
     with_implicit_tolerances,
 )
-from lagjax._integrate.taylor_run import run_taylor
+from lagjax._integrate.taylor_heyoka_repeat import run_taylor_reusing_checks
 from lagjax._integrate.time_transformed_run import (
     check_no_tolerances_for,
     run_time_transformed,
@@ -182,11 +182,13 @@ def simulate(
             return run_time_transformed(system, y0, t0, t1, ds, time_transformed,
                                         ts, args, max_steps, throw)  # fmt: skip
     if isinstance(solver, Taylor):  # Taylor series of the derived equations
-        return run_taylor(system, y0, t0, t1, dt, solver, ts, args, rtol, atol,
-                          max_steps, throw, saveat=saveat, adjoint=adjoint,
-                          dense=dense, event=event, progress=progress,
-                          stepsize_controller=stepsize_controller,
-                          progress_meter=progress_meter)  # fmt: skip
+        # a repeated heyoka call reuses its first call's checks and set-up
+        return run_taylor_reusing_checks(
+            system, y0, t0, t1, dt, solver, ts, args, rtol, atol, max_steps, throw,
+            saveat=saveat, adjoint=adjoint, dense=dense, event=event,
+            progress=progress, stepsize_controller=stepsize_controller,
+            progress_meter=progress_meter,
+        )  # fmt: skip
     if isinstance(solver, WisdomHolman):  # Jacobi coordinates, saves on the step grid
         return run_wisdom_holman(system, y0, t0, t1, dt, solver, ts, args, max_steps,
                                  throw, saveat=saveat, adjoint=adjoint, dense=dense,

@@ -40,10 +40,9 @@ from lagjax._integrate.checks.inputs import check_simulate_inputs
 from lagjax._integrate.checks.late_failure import raise_if_failed
 from lagjax._integrate.taylor_heyoka import (
     BAD_TIMES_MESSAGE,
-    bad_times,
     heyoka_member,
     heyoka_runner,
-    run_statistics,
+    member_trajectory,
 )
 from lagjax._integrate.taylor_polynomial_run import simulate_taylor_polynomials
 from lagjax.taylor.integrate import RESULTS as TAYLOR_RESULTS
@@ -220,17 +219,7 @@ def simulate_taylor(
             final_only=ts is None,
         )  # fmt: skip
         rows = heyoka_member(runner, flat0, args, t0, t1, ts)
-        stats = run_statistics(rows, structure, steps)
-        stats["bad_times"] = bad_times(rows)
-        result = stats.pop("result")
-        if isinstance(rows.ys, np.ndarray):  # NumPy to the end on the CPU route
-            ys = _unravel_rows(field, rows.ys)
-        else:
-            ys = jax.vmap(unravel)(rows.ys)
-        return Trajectory(
-            ts=rows.ts, ys=ys, system=system, args=args, run_stats=stats,  # pyright: ignore[reportArgumentType]
-            result=result, solver_name="Taylor[heyoka]",
-        )  # fmt: skip
+        return member_trajectory(field, rows, structure, steps, system, args)
     solution = taylor_integrate_vmappable(
         field, flat0, t0, t1, ts=ts, args=args, rtol=rtol, atol=atol,
         order=solver.order, max_steps=steps, forward_mode=solver.forward_mode,
@@ -248,15 +237,6 @@ def simulate_taylor(
         run_stats=stats, result=as_diffrax_result(solution.result),
         solver_name=f"Taylor[{solver.backend}]",
     )  # fmt: skip
-
-
-def _unravel_rows(field: FlatVectorField, flat_ys: np.ndarray) -> Any:
-    """Each row of `flat_ys` as (q, second), in NumPy, a leading axis per leaf."""
-    treedef, shapes, _ = field.layout
-    sizes = [int(np.prod(shape)) for shape in shapes]
-    pieces = np.split(flat_ys, np.cumsum(sizes)[:-1], axis=1)
-    leaves = [p.reshape((len(flat_ys), *shape)) for p, shape in zip(pieces, shapes)]
-    return jax.tree_util.tree_unflatten(treedef, leaves)
 
 
 def as_diffrax_result(result: Any) -> Any:

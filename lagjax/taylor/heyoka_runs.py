@@ -116,6 +116,35 @@ class HeyokaRunner:
                 field[live] = value[: live.size]
         return out
 
+    def integrator(self) -> Any:
+        """The compiled scalar integrator `final_state` runs on (cached,
+        `heyoka_cache.heyoka_integrator`)."""
+        return heyoka_integrator(
+            self.system, self.tol, 1, self.fp_type, self.compact_mode, self.events
+        )
+
+    def final_state(self, ta: Any, y0, pars, t0: float, t1: float) -> Rows:
+        """One member to `t1`, saved there, on the scalar integrator `ta` (from
+        `integrator()`): the rows `__call__` gives for it without a batch axis,
+        from one `propagate_until`, as heyoka's own users call it — no blocks,
+        lanes or dense-output grid, whose NumPy bookkeeping costs as much as a
+        short run. Only for a `final_only` runner without events."""
+        if self.events or not self.final_only:
+            raise ValueError("final_state runs to t1 without events; use the call")
+        ta.time = self.fp_type(t0)
+        ta.state[:], ta.pars[:] = y0, pars
+        outcome, _, _, steps, *_ = ta.propagate_until(
+            self.fp_type(t1), max_steps=self.max_steps
+        )
+        code = _code(outcome)
+        state = ta.state.copy() if code == SUCCESS else np.full_like(ta.state, np.nan)
+        return Rows(
+            np.full(1, t1, self.fp_type),
+            state[None],
+            np.asarray(steps, np.int64),
+            np.asarray(code, np.int32),
+        )
+
     def _block(self, lanes: _Lanes, y0s, pars, t0s, t1s, grids) -> Rows:
         """One block of members through heyoka, one per lane."""
         lanes.start(y0s, pars, t0s)
@@ -184,13 +213,15 @@ def _ordered(t0s, t1s, grids) -> np.ndarray:
     return np.all(steps > 0, axis=1) & (first >= 0) & (last >= 0)
 
 
+_CODES = {name: code for code, name in OUTCOME_NAMES.items()}
+
+
 def _code(outcome: Any) -> int:
     """heyoka's `taylor_outcome` as an outcome code."""
     value = int(outcome.value)
     if value < 0 and value >= -(2**31):  # a terminal event: -1 - its index
         return FIRST_EVENT - 1 - value
-    names = {name: code for code, name in OUTCOME_NAMES.items()}
-    return names.get(outcome.name, OTHER)
+    return _CODES.get(outcome.name, OTHER)
 
 
 class _Lanes:

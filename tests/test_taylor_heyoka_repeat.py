@@ -1,0 +1,143 @@
+"""Repeated `simulate(..., solver=lj.Taylor(backend="heyoka"))` calls
+(`lagjax._integrate.taylor_heyoka_repeat`): a call of a known structure gives the
+first-call path's trajectory, reads its new values (state, parameters, times),
+and refuses bad values with the first-call path's own errors."""
+
+from collections import OrderedDict
+
+import diffrax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import lagjax as lj
+from lagjax._integrate import taylor_heyoka_repeat
+from lagjax._integrate.taylor_run import run_taylor
+
+pytest.importorskip("heyoka")
+
+TOL = 1e-13
+
+
+def double_pendulum(q, qd, t, args):
+    """m = l = 1; `args["g"]` the gravity."""
+    (a, b), (u, v) = (q[0], q[1]), (qd[0], qd[1])
+    kinetic = u**2 + 0.5 * v**2 + u * v * jnp.cos(a - b)
+    return kinetic + args["g"] * (2 * jnp.cos(a) + jnp.cos(b))
+
+
+PENDULUM = lj.Lagrangian(double_pendulum)
+
+
+def energy_of(state, g: float) -> float:
+    """T + V of the double pendulum, in NumPy."""
+    (a, b), (u, v) = (np.asarray(x, np.float64) for x in state)
+    return u**2 + 0.5 * v**2 + u * v * np.cos(a - b) - g * (2 * np.cos(a) + np.cos(b))
+
+
+def start(a: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+    return np.array([a, 0.3]), np.zeros(2)
+
+
+def repeated(y0, **kwargs):
+    """`simulate` as a user calls it: a fresh `lj.Taylor` each time."""
+    return lj.simulate(PENDULUM, y0, rtol=TOL, atol=TOL,
+                       solver=lj.Taylor(backend="heyoka"), **kwargs)  # fmt: skip
+
+
+def first_call_path(y0, t1, ts=None, args=None, max_steps=None, throw=True):
+    """What `simulate` ran for every heyoka call before repeats were kept."""
+    return run_taylor(PENDULUM, y0, 0.0, t1, None, lj.Taylor(backend="heyoka"), ts,
+                      args, TOL, TOL, max_steps, throw)  # fmt: skip
+
+
+@pytest.fixture
+def first_calls(monkeypatch):
+    """The calls that went the first-call way, from no kept repeat."""
+    calls = []
+
+    def counted(*args, **kwargs):
+        calls.append(args)
+        return run_taylor(*args, **kwargs)
+
+    monkeypatch.setattr(taylor_heyoka_repeat, "run_taylor", counted)
+    monkeypatch.setattr(taylor_heyoka_repeat, "_REPEATS", OrderedDict())
+    return calls
+
+
+def same_trajectory(a, b):
+    assert a.stats["solver"] == b.stats["solver"] == "Taylor[heyoka]"
+    assert a.result == b.result and a.system is b.system
+    np.testing.assert_array_equal(a.ts, b.ts)
+    for x, y in zip(a.ys, b.ys):
+        assert type(x) is type(y)
+        np.testing.assert_array_equal(x, y)
+    assert a.stats.keys() == b.stats.keys()
+    for key in a.stats:
+        assert np.all(a.stats[key] == b.stats[key]), key
+
+
+def test_a_repeat_reads_new_values_and_gives_the_first_call_path_trajectory(
+    first_calls,
+):
+    ts = np.linspace(0.0, 2.0, 5)
+    cases = [
+        dict(t1=2.0, args={"g": 9.81}),  # the first call of each structure
+        dict(t1=2.0, args={"g": 9.81}, ts=ts),
+        dict(t1=2.0, args={"g": 4.0}),  # repeats: new values
+        dict(t1=3.0, args={"g": 9.81}, y0=start(0.8)),
+        dict(t1=2.0, args={"g": 4.0}, ts=ts),
+        dict(t1=0.1, args={"g": 9.81}, y0=tuple(np.float32(x) for x in start())),
+        dict(t1=0.3, args={"g": 9.81}, y0=tuple(np.float32(x) for x in start(0.2))),
+    ]
+    finals = []
+    for case in cases:
+        y0 = case.pop("y0", start())
+        run = repeated(y0, **case)
+        same_trajectory(run, first_call_path(y0, **case))
+        finals.append(np.concatenate([run.q[-1], run.qdot[-1]]))
+        # the physics: the conservative pendulum keeps its energy
+        g = np.asarray(case["args"]["g"], y0[0].dtype)  # the run's parameter
+        end = energy_of((run.q[-1], run.qdot[-1]), g)
+        assert abs(end - energy_of(y0, g)) < 1e-11
+    assert len(first_calls) == 3  # one per structure, the rest repeats
+    assert not np.allclose(finals[0], finals[2])  # g read anew
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [
+        dict(y0=(np.array([np.nan, 0.3]), np.zeros(2))),
+        dict(args={"g": np.nan}),
+        dict(t1=np.inf),
+        dict(t1=0.0),
+        dict(ts=np.array([0.5, 0.2])),
+        dict(ts=np.array([0.5, 9.0])),
+    ],
+)
+def test_bad_values_on_a_repeat_are_refused_as_on_a_first_call(bad, first_calls):
+    good = dict(y0=start(), t1=1.0, args={"g": 9.81})
+    with_ts = "ts" in bad
+    repeated(good["y0"], t1=1.0, args=good["args"], ts=[0.5] if with_ts else None)
+    assert len(first_calls) == 1 and len(taylor_heyoka_repeat._REPEATS) == 1
+    call = {**good, **bad}
+    y0 = call.pop("y0")
+    with pytest.raises(ValueError) as first:
+        first_call_path(y0, **call)
+    with pytest.raises(ValueError) as repeat:
+        repeated(y0, **call)
+    assert str(repeat.value) == str(first.value)
+    assert len(first_calls) == 2  # the repeat handed the bad call over
+
+
+def test_a_failed_repeat_raises_the_first_call_path_error(first_calls):
+    pendulum = dict(t1=50.0, args={"g": 9.81}, max_steps=5)
+    kept = repeated(start(), throw=False, **pendulum)  # kept, though it failed
+    assert kept.result == diffrax.RESULTS.max_steps_reached
+    assert np.all(np.isnan(kept.q))  # not reached: NaN, as on a first call
+    with pytest.raises(lj.SimulationError) as first:
+        first_call_path(start(), **pendulum)
+    with pytest.raises(lj.SimulationError) as repeat:
+        repeated(start(), **pendulum)
+    assert str(repeat.value) == str(first.value)
+    assert len(first_calls) == 1  # the failed run was a repeat
