@@ -65,6 +65,11 @@ class AbstractTimeReversible(diffrax.AbstractSolver):
         """Whether this instance's step is symmetric (default: every instance)."""
         return True
 
+    def is_bit_reversible(self) -> bool:
+        """Whether a step of −h undoes a step of h to the last bit, not only up to
+        round-off (an integer-lattice splitting; default: no)."""
+        return False
+
 
 class DefaultMethod(enum.Enum):
     """The method a system asks for when the caller names no solver."""

@@ -123,12 +123,14 @@ class ReversibleAdjoint(eqx.Module):
                 f"{self.checkpoint_bytes}"
             )
 
-    def spacing(self, steps: int, mark_bytes: int) -> int | None:
+    def spacing(self, steps: int, mark_bytes: int, exact: bool = False) -> int | None:
         """Steps between checkpoints in a run of `steps` steps whose state and
-        solver state take `mark_bytes`; None for no checkpoints."""
+        solver state take `mark_bytes`; None for no checkpoints. `exact`: the
+        solver walks back to the last bit (`lj.BitReversible`), so checkpoints
+        bound no round-off and the default keeps none."""
         if self.checkpoints is not None:
             return self.checkpoints
-        if self.checkpoint_bytes == 0:
+        if self.checkpoint_bytes == 0 or exact:
             return None
         by_budget = math.ceil(steps * mark_bytes / self.checkpoint_bytes)
         spacing = max(ROUND_OFF_SPACING, by_budget)
@@ -139,7 +141,9 @@ class ReversibleAdjoint(eqx.Module):
         steps = fixed_step_count(t0, t1, dt)
         dt = math.copysign(abs(dt), t1 - t0)
         clock = Clock(t0, dt, dtype, steps - 1, t1)
-        spacing = self.spacing(steps, _mark_bytes(solver, terms, clock, y0, args))
+        spacing = self.spacing(
+            steps, _mark_bytes(solver, terms, clock, y0, args), _exact(solver)
+        )
         marks = _marks([steps], spacing)
         states, results, _ = reversible_run((y0, terms, args), solver, clock, marks)
         reached = finite_marks(states, results)
@@ -155,7 +159,8 @@ class ReversibleAdjoint(eqx.Module):
         save_steps = [lead + i * every for i in range(saves)]
         clock = Clock(t0, dt, dtype)
         mark_bytes = _mark_bytes(solver, terms, clock, y0, args)
-        marks = _marks(save_steps, self.spacing(save_steps[-1], mark_bytes))
+        spacing = self.spacing(save_steps[-1], mark_bytes, _exact(solver))
+        marks = _marks(save_steps, spacing)
         positions = marks.positions()
         states, results, _ = reversible_run((y0, terms, args), solver, clock, marks)
         reached = finite_marks(states, results)
@@ -177,9 +182,13 @@ class ReversibleAdjoint(eqx.Module):
         del most  # the loops between marks take traced lengths instead
         clock = Clock(t0, dt, dtype)
         mark_bytes = _mark_bytes(solver, terms, clock, y0, args)
-        spacing = self.spacing(int(brackets[-1]) + 1, mark_bytes)
+        spacing = self.spacing(int(brackets[-1]) + 1, mark_bytes, _exact(solver))
         return reversible_off_grid(terms, solver, dense_solver, (t0, t1, dt),
                                    brackets, ts, y0, args, dtype, spacing)  # fmt: skip
+
+
+def _exact(solver) -> bool:
+    return isinstance(solver, AbstractTimeReversible) and solver.is_bit_reversible()
 
 
 def _marks(save_steps: list[int], spacing: int | None) -> Marks:

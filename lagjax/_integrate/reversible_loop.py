@@ -240,7 +240,8 @@ class _GenericWalk(eqx.Module):
 
     def start(self, cotangent, y, state, params, steps: int) -> _Backward:
         del y, steps
-        return _Backward(cotangent, _zeros(state), _zeros(params))
+        floating = eqx.filter(state, eqx.is_inexact_array)
+        return _Backward(cotangent, _zeros(floating), _zeros(params))
 
     def back(self, carry: Any, y, state, end, length: Any, params,
              saved) -> _Backward:  # fmt: skip
@@ -268,9 +269,14 @@ def _steps_back(carry: _Backward, y, state, end, length, params, static, solver,
         y, state, k, cotangent = inner
         start, stop = clock.times(k - 1)
         y, state = step(y, state, params, (stop, start))
-        _, pullback = jax.vjp(
-            lambda y, s, p: step(y, s, p, (start, stop)), y, state, params
-        )
+        # Integer parts of the state (a lattice's units) have no cotangent.
+        floating, exact = eqx.partition(state, eqx.is_inexact_array)
+
+        def forward(y, floating, params):
+            y1, state1 = step(y, eqx.combine(floating, exact), params, (start, stop))
+            return y1, eqx.filter(state1, eqx.is_inexact_array)
+
+        _, pullback = jax.vjp(forward, y, floating, params)
         y_bar, state_bar, params_bar = pullback((cotangent.y, cotangent.state))
         cotangent = _Backward(y_bar, state_bar, _add(cotangent.params, params_bar))
         return y, state, k - 1, cotangent
@@ -288,7 +294,8 @@ def _through_init(carry: _Backward, y0, params, static, solver, clock: Clock):
 
     def init(y0, params):
         terms, args = eqx.combine(params, static)
-        return solver.init(terms, *clock.first_times(), y0, args)
+        state = solver.init(terms, *clock.first_times(), y0, args)
+        return eqx.filter(state, eqx.is_inexact_array)
 
     _, pullback = jax.vjp(init, y0, params)
     y0_bar, params_bar = pullback(carry.state)

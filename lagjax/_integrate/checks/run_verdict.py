@@ -121,8 +121,9 @@ NON_FINITE_MESSAGE = (
     "singular mass matrix (degenerate L, or a coordinate singularity such as "
     "Euler-angle gimbal lock), redundant or dependent constraints (a "
     "rank-deficient constraint Jacobian in RATTLE's G M^-1 G^T), a step too large "
-    "for a stiff problem, a collision/singular potential, or an infinite "
-    "parameter in args. simulate(..., throw=False) returns the trajectory up to "
+    "for a stiff problem, a collision/singular potential, an infinite "
+    "parameter in args, or a BitReversible state leaving its integer lattice "
+    "(pass q_range= and p_range= above the run's largest |q| and |p|). simulate(..., throw=False) returns the trajectory up to "
     "there instead of raising."
 )
 
