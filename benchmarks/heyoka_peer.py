@@ -1,16 +1,19 @@
 r"""heyoka as a peer: its Taylor integrator beside lagjax's Dopri8, and lagjax's
 equations run by heyoka through the backend (`lagjax.taylor.heyoka_backend`).
 
-Three columns on one pinned core: **heyoka** — the equations derived by heyoka
+The routes, on one pinned core: **heyoka** — the equations derived by heyoka
 itself (`heyoka.lagrangian`) and integrated by `taylor_adaptive` /
 `taylor_adaptive_batch`; **lagjax→heyoka** — the equations derived by lagjax
 (`lj.Lagrangian(L).acceleration`), their jaxpr translated into heyoka's expressions
 (`heyoka_integrate`); **lagjax Taylor (JAX)** — the JAX-native Taylor integrator
 (`lagjax.taylor.taylor_integrate`, jitted: its coefficients from the jaxpr, each
 order one matrix product, `lagjax.taylor.order_map`); **lagjax Dopri8** — `lj.simulate` with `diffrax.Dopri8` at
-rtol = atol = 1e-14, jitted; and **simulate(Taylor heyoka)** — what a user writes,
-`lj.simulate(lag, y0, solver=lj.Taylor(backend="heyoka"))`, checks and all. Cases,
-unit masses and rods, g = 9.81:
+rtol = atol = 1e-14, jitted; **simulate(Taylor heyoka)** — what a user writes,
+`lj.simulate(lag, y0, solver=lj.Taylor(backend="heyoka"))`, checks and all, the
+solver made once like any diffrax solver (making an `lj.Taylor` is an equinox
+Module's `__init__`, 0.1–0.2 ms); and for the batch **vmap(simulate heyoka)** —
+`jax.jit(jax.vmap(...))` of that call, one `pure_callback` into heyoka's batch
+mode (`lagjax.taylor.heyoka_callback`). Cases, unit masses and rods, g = 9.81:
 
 (a) the double pendulum from θ = (0.5, 0.3), q̇ = 0, to t = 100; heyoka at tol 1e-12
     and 1e-15; the error is the largest difference of the final state from heyoka
@@ -20,8 +23,12 @@ unit masses and rods, g = 9.81:
 (c) the n-link pendulum, n = 2, 4, 8, released at rest from 0.5 rad, to t = 10:
     first call (derivation, translation, compilation) and run.
 
-Runs are medians of at least five warm calls; compilation is timed apart. heyoka
-is optional (`pip install heyoka`). `--quick` shortens every run (CI check).
+Runs are medians of warm calls, those of one case's heyoka routes taken in
+turn (a change in the machine's load falls on all alike; 31 rounds for one
+trajectory, 9 for the batch); compilation is timed apart. The process keeps to
+the first core it may use (`taskset -c 1 python -m benchmarks.heyoka_peer` pins
+core 1). heyoka is optional (`pip install heyoka`). `--quick` shortens every
+run (CI check).
 
 References: F. Biscani & D. Izzo, "Revisiting high-order Taylor methods for
 astrodynamics and celestial mechanics", MNRAS 504 (2021) 2614; À. Jorba & M. Zou,
@@ -55,7 +62,9 @@ REFERENCE_TOL = 1e-18
 FULL = dict(
     single_t1=100.0,
     single_tols=(1e-12, 1e-15),
+    single_repeats=31,
     batch=1024,
+    batch_repeats=9,
     batch_t1=10.0,
     batch_tols=(1e-9, 1e-15),
     links=(2, 4, 8),
@@ -65,7 +74,9 @@ FULL = dict(
 QUICK = dict(
     single_t1=5.0,
     single_tols=(1e-12,),
+    single_repeats=5,
     batch=16,
+    batch_repeats=5,
     batch_t1=1.0,
     batch_tols=(1e-9,),
     links=(2,),
@@ -82,6 +93,20 @@ def median_seconds(call: Callable[[], Any], repeats: int = 5) -> float:
         jax.block_until_ready(call())
         runs.append(time.perf_counter() - start)
     return statistics.median(runs)
+
+
+def interleaved_medians(calls: list[Callable[[], Any]], repeats: int) -> list[float]:
+    """Medians of warm calls taken in turn, so that a change in the machine's
+    load falls on every route alike (their ratios are the figures)."""
+    for call in calls:
+        call()
+    runs: list[list[float]] = [[] for _ in calls]
+    for _ in range(repeats):
+        for call, times in zip(calls, runs):
+            start = time.perf_counter()
+            jax.block_until_ready(call())
+            times.append(time.perf_counter() - start)
+    return [statistics.median(times) for times in runs]
 
 
 def timed(call: Callable[[], Any]) -> tuple[float, Any]:
@@ -143,50 +168,46 @@ def reference(chain: Chain, y0: np.ndarray, t1: float) -> np.ndarray:
 
 
 def row(
-    case: str, route: str, tol: float, first_s: float, call: Callable, exact
-) -> dict:
-    """One table row: `call()` returns the final state(s), compared with `exact`."""
+    case: str, route: str, tol: float, first_s: float, call: Callable, exact,
+    run_s: float | None = None,
+) -> dict:  # fmt: skip
+    """One table row: `call()` returns the final state(s), compared with `exact`;
+    its run time `run_s`, or the median of its own warm calls."""
     error = np.max(np.abs(np.asarray(call(), dtype=float) - exact))
-    return dict(case=case, route=route, tol=tol, first_s=first_s,
-                run_s=median_seconds(call), error=float(error))  # fmt: skip
+    run_s = median_seconds(call) if run_s is None else run_s
+    return dict(case=case, route=route, tol=tol, first_s=first_s, run_s=run_s,
+                error=float(error))  # fmt: skip
 
 
 def heyoka_rows(case: str, chain: Chain, y0, t1: float, tol: float, exact,
-                derive_s: float = 0.0) -> list[dict]:  # fmt: skip
+                repeats: int, derive_s: float = 0.0) -> list[dict]:  # fmt: skip
     """heyoka's own equations, and lagjax's through the backend, at `tol`."""
     compile_s, ta = timed(lambda: chain.heyoka(y0, tol))
 
     def backend():
         return heyoka_integrate(chain.vector_field, y0, 0.0, t1, tol=tol).ys[-1]
 
+    solver = lj.Taylor(backend="heyoka")  # made once, as a diffrax solver is
+
     def simulate_taylor():
         n = chain.n
         run = lj.simulate(chain.lagrangian, (y0[:n], y0[n:]), t1=t1, rtol=tol,
-                          atol=tol, solver=lj.Taylor(backend="heyoka"))  # fmt: skip
+                          atol=tol, solver=solver)  # fmt: skip
         return np.concatenate([run.q[-1], run.qdot[-1]])
+
+    def heyoka():
+        return heyoka_until(ta, y0, t1)
 
     first_s, _ = timed(backend)
     simulate_first_s, _ = timed(simulate_taylor)
+    runs = interleaved_medians([heyoka, backend, simulate_taylor], repeats)
     return [
-        row(
-            case,
-            "heyoka",
-            tol,
-            derive_s + compile_s,
-            lambda: heyoka_until(ta, y0, t1),
-            exact,
-        ),
-        row(case, "lagjax->heyoka", tol, first_s, backend, exact),
+        row(case, "heyoka", tol, derive_s + compile_s, heyoka, exact, runs[0]),
+        row(case, "lagjax->heyoka", tol, first_s, backend, exact, runs[1]),
         # what a user writes: lj.simulate(lag, y0, solver=lj.Taylor(backend="heyoka"))
-        row(
-            case,
-            "simulate(Taylor heyoka)",
-            tol,
-            simulate_first_s,
-            simulate_taylor,
-            exact,
-        ),
-    ]
+        row(case, "simulate(Taylor heyoka)", tol, simulate_first_s, simulate_taylor,
+            exact, runs[2]),
+    ]  # fmt: skip
 
 
 def dopri8_row(case: str, chain: Chain, y0s, t1: float, exact) -> dict:
@@ -212,13 +233,14 @@ def single_case(config: dict) -> list[dict]:
     y0 = np.array([0.5, 0.3, 0.0, 0.0])
     exact = reference(chain, y0, t1)
     rows = [r for tol in config["single_tols"]
-            for r in [*heyoka_rows("single", chain, y0, t1, tol, exact),
+            for r in [*heyoka_rows("single", chain, y0, t1, tol, exact,
+                                   config["single_repeats"]),
                       jax_taylor_row("single", chain, y0, t1, tol, exact)]]  # fmt: skip
     return [*rows, dopri8_row("single", chain, y0, t1, exact)]
 
 
 def batch_rows(
-    case: str, chain: Chain, y0s, t1: float, tol: float, exact
+    case: str, chain: Chain, y0s, t1: float, tol: float, exact, repeats: int
 ) -> list[dict]:
     """heyoka's batch mode at its SIMD width, raw and through the backend."""
     width = import_heyoka().recommended_simd_size()
@@ -238,9 +260,24 @@ def batch_rows(
             :, -1
         ]
 
+    solver, n = lj.Taylor(backend="heyoka"), chain.n
+
+    def final(y0):  # under vmap: one pure_callback, heyoka's batch mode
+        run = lj.simulate(chain.lagrangian, (y0[:n], y0[n:]), t1=t1, rtol=tol,
+                          atol=tol, solver=solver)  # fmt: skip
+        return jnp.concatenate([run.q[-1], run.qdot[-1]])
+
+    def vmapped():
+        return batched(y0s)
+
+    batched = jax.jit(jax.vmap(final))
     first_s, _ = timed(backend)
-    return [row(case, "heyoka", tol, compile_s, raw, exact),
-            row(case, "lagjax->heyoka", tol, first_s, backend, exact)]  # fmt: skip
+    vmap_first_s, _ = timed(vmapped)
+    runs = interleaved_medians([raw, backend, vmapped], repeats)
+    return [row(case, "heyoka", tol, compile_s, raw, exact, runs[0]),
+            row(case, "lagjax->heyoka", tol, first_s, backend, exact, runs[1]),
+            row(case, "vmap(simulate heyoka)", tol, vmap_first_s, vmapped, exact,
+                runs[2])]  # fmt: skip
 
 
 def batch_case(config: dict) -> list[dict]:
@@ -249,7 +286,8 @@ def batch_case(config: dict) -> list[dict]:
     exact = np.stack([reference(chain, y0, t1) for y0 in y0s])
     case = f"batch x{members}"
     rows = [r for tol in config["batch_tols"]
-            for r in batch_rows(case, chain, y0s, t1, tol, exact)]  # fmt: skip
+            for r in batch_rows(case, chain, y0s, t1, tol, exact,
+                                config["batch_repeats"])]  # fmt: skip
     return [*rows, dopri8_row(case, chain, y0s, t1, exact)]
 
 
@@ -262,7 +300,8 @@ def chain_case(config: dict) -> list[dict]:
         y0 = np.concatenate([np.full(n, 0.5), np.zeros(n)])
         exact = reference(chain, y0, t1)
         case = f"{n}-link"
-        rows += heyoka_rows(case, chain, y0, t1, config["chain_tol"], exact, derive_s)
+        rows += heyoka_rows(case, chain, y0, t1, config["chain_tol"], exact,
+                            config["single_repeats"], derive_s)  # fmt: skip
         rows.append(dopri8_row(case, chain, y0, t1, exact))
     return rows
 
@@ -283,7 +322,8 @@ def main() -> None:
     options = parser.parse_args()
     enable_fast_cpu_loops()  # before the first JAX computation
     jax.config.update("jax_enable_x64", True)
-    os.sched_setaffinity(0, {0})  # one core (Linux)
+    # one core (Linux): the first of those allowed (`taskset -c 1` picks it)
+    os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
     config = QUICK if options.quick else FULL
     rows = single_case(config) + batch_case(config) + chain_case(config)
     print_table(rows)

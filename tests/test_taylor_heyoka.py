@@ -79,6 +79,21 @@ def test_batch_equals_single_runs():
     assert list(batch.status) == ["time_limit"] * 6
 
 
+def test_final_states_equal_the_dense_output_path():
+    """A run saving only t1 goes straight there (one propagate_until per block);
+    saving at ts = [t1] goes through heyoka's dense-output grid: same states, same
+    steps, for every member of a padded batch and for one."""
+    y0s = np.stack([[a, 0.3, 0.0, 0.0] for a in np.linspace(0.1, 1.0, 6)])
+    for starts in (y0s, y0s[:1]):
+        direct = heyoka_integrate_batch(vector_field, starts, 0.0, 1.0, args=ARGS,
+                                        tol=1e-15)  # fmt: skip
+        grid = heyoka_integrate_batch(vector_field, starts, 0.0, 1.0, ts=[1.0],
+                                      args=ARGS, tol=1e-15)  # fmt: skip
+        np.testing.assert_array_equal(direct.ys, grid.ys)
+        np.testing.assert_array_equal(direct.num_steps, grid.num_steps)
+        assert list(direct.status) == list(grid.status) == ["time_limit"] * len(starts)
+
+
 def test_new_args_do_not_recompile():
     heyoka_integrate(vector_field, Y0, 0.0, 1.0, args=ARGS, tol=1e-14)
     before = heyoka_cache_info()

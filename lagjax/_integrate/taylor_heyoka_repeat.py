@@ -90,7 +90,10 @@ def run_taylor_reusing_checks(
         if covered
         else None
     )
-    repeat = None if key is None else _REPEATS.get(key)
+    try:
+        repeat = None if key is None else _REPEATS.get(key)
+    except TypeError:  # an unhashable value in the key: not covered
+        key = repeat = None
     if repeat is not None:
         _REPEATS.move_to_end(key)
         trajectory = repeat.run(y0, t0, t1, ts, args, rtol, throw)
@@ -192,24 +195,19 @@ _REPEATS: OrderedDict[Hashable, _Repeat] = OrderedDict()
 
 def _structure(system, y0, t0, t1, solver, ts, args, rtol, atol, max_steps):
     """The key of a call's structure (module docstring), or None for a call a
-    repeat does not cover: traced or non-numeric times, traced leaves, anything
-    unhashable."""
+    repeat does not cover: traced or non-numeric times, traced leaves (and,
+    found on look-up, anything unhashable)."""
     if not all(_real_number(t) for t in (t0, t1)) or isinstance(ts, Tracer):
         return None
     y0_leaves, y0_tree = jax.tree_util.tree_flatten(y0)
     args_leaves, args_tree = jax.tree_util.tree_flatten(args)
     if any(isinstance(x, Tracer) for x in (*y0_leaves, *args_leaves)):
         return None
-    key = (
+    return (
         id(system), y0_tree, _leaf_types(y0_leaves), args_tree,
         _leaf_types(args_leaves), ts is None, rtol, atol, max_steps,
         _solver_fields(solver), bool(jax.config.read("jax_enable_x64")),
     )  # fmt: skip
-    try:
-        hash(key)
-    except TypeError:
-        return None
-    return key
 
 
 def _real_number(value: Any) -> bool:

@@ -181,7 +181,8 @@ def heyoka_integrate_batch(
     )  # fmt: skip
     rows = runner(y0s, pars, np.full(members, t0), np.full(members, t1),
                   np.tile(grid, (members, 1)))  # fmt: skip
-    status = np.array([outcome_name(code) for code in rows.codes], dtype=object)
+    names = {code: outcome_name(code) for code in np.unique(rows.codes)}
+    status = np.array([names[code] for code in rows.codes], dtype=object)
     for outcome in dict.fromkeys(status):
         _check(outcome, throw, max_steps, system)
     return HeyokaSolution(grid, rows.ys, rows.num_steps, status)
