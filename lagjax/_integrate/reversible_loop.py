@@ -55,6 +55,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from lagjax._integrate.reversible_lattice import LatticeWalk
 from lagjax._integrate.reversible_splitting import SplittingWalk
 from lagjax._integrate.reversible_steps import repeat_steps
 from lagjax._integrate.scan_body import (
@@ -64,6 +65,7 @@ from lagjax._integrate.scan_body import (
     step_times,
     steps_per_trip,
 )
+from lagjax.solvers.bit_reversible import BitReversible
 from lagjax.solvers.splitting import AbstractSplittingSolver
 
 
@@ -182,11 +184,12 @@ def _reversible_run_bwd(residuals, cotangents, perturbed, differentiable, solver
     state_cotangents = _dense_cotangents(cotangents[0], states)
     y0, terms, args = differentiable
     params, static = eqx.partition((terms, args), eqx.is_inexact_array)
-    walk = (
-        SplittingWalk(solver, static, clock)
-        if isinstance(solver, AbstractSplittingSolver)
-        else _GenericWalk(solver, static, clock, y0)
-    )
+    if isinstance(solver, AbstractSplittingSolver):
+        walk = SplittingWalk(solver, static, clock)
+    elif isinstance(solver, BitReversible):
+        walk = LatticeWalk(solver, static, clock)
+    else:
+        walk = _GenericWalk(solver, static, clock, y0)
 
     def at(index, tree):
         return jax.tree_util.tree_map(lambda x: x[index], tree)

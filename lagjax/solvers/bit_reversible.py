@@ -49,7 +49,6 @@ integrator for N-body dynamics", MNRAS 473, 3351 (2018); Hairer, Lubich & Wanner
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Callable
 from typing import Any, ClassVar
 
@@ -111,8 +110,9 @@ class Lattice(eqx.Module):
         return jax.tree_util.tree_map(lambda u, s: u * s, units, self.p)
 
 
-def _moved(units: Any, increment: Any, spacing: Any) -> tuple[Any, Any]:
-    """`(units + [increment/spacing], too_large)`, the flag per leaf."""
+def lattice_moved(units: Any, increment: Any, spacing: Any) -> tuple[Any, Any]:
+    """`(units + [increment/spacing], too_large)`, the flag per leaf: one stage's
+    move on the lattice (`reversible_lattice` undoes it with −increment)."""
 
     def move(u, d, s):
         steps = d / s
@@ -136,11 +136,7 @@ def _outside(units: Any) -> jax.Array:
     return jnp.any(jnp.stack([jnp.any(jnp.abs(u) > _STATE_LIMIT) for u in leaves]))
 
 
-def _scaled(control: Any, coefficient: float) -> Any:
-    return jax.tree_util.tree_map(lambda c: coefficient * c, control)
-
-
-def _step_size(t0, t1, nominal):
+def step_size(t0, t1, nominal):
     """t1 − t0, as ±`nominal` when it is that step up to the times' round-off.
 
     The loops compute a step's times as t0 + k·dt, which XLA may round
@@ -156,74 +152,117 @@ def _step_size(t0, t1, nominal):
     return jnp.where(same, jnp.where(raw < 0, -nominal, nominal), raw)
 
 
-def _lattice_step(method, terms, t0, t1, units, lattice: Lattice, force, args,
-                  nominal):  # fmt: skip
-    """One step of `method`'s table on the lattice: `(units, force, overflow)`.
+def _with_tangent(function, point, params, point_dot, params_dot):
+    """`(function(point, params), its tangent)`; the tangent None when no tangent
+    is carried (the primal run)."""
+    if point_dot is None:
+        return function(point, params), None
+    return jax.jvp(function, (point, params), (point_dot, params_dot))
+
+
+def _add(a: Any, b: Any) -> Any:
+    return jax.tree_util.tree_map(jnp.add, a, b)
+
+
+def _lattice_step(method, params, static, times, units, lattice: Lattice, force,
+                  tangents=None):  # fmt: skip
+    """One step of `method`'s table on the lattice: `(units, force, overflow,
+    tangents)`.
 
     `force` is the kick vector field at (t0, q0); the one returned is at (t1, q1)
-    (first-same-as-last, as the floating-point engine keeps it). The controls
-    are the step size itself (ODE terms in t)."""
-    term_q, term_p = terms
+    (first-same-as-last, as the floating-point engine keeps it). `times =
+    (t0, t1, nominal)`; the controls are the step size itself (ODE terms in t).
+    With `tangents = (q̇, ṗ, ḟorce, θ̇)` the step's tangent is carried along: each
+    stage linearized at the lattice point it is evaluated at, the rounding passed
+    straight through; `(q̇1, ṗ1, ḟorce1)` is returned."""
+    t0, t1, nominal = times
+    (term_q, term_p), _ = eqx.combine(params, static)
     q_units, p_units = units
-    control_q = control_p = _step_size(t0, t1, nominal)
+    q_dot, p_dot, force_dot, params_dot = tangents or (None,) * 4
+    h = step_size(t0, t1, nominal)
     kicks, drifts = method.kick_coefficients, method.drift_coefficients
-    kick = term_p.prod(force, _scaled(control_p, kicks[0]))
-    p_units, flag = _moved(p_units, kick, lattice.p)
+
+    def velocity(p, params, t):
+        (term_q, _), args = eqx.combine(params, static)
+        return term_q.vf(t, p, args)
+
+    def field(q, params, t):
+        (_, term_p), args = eqx.combine(params, static)
+        return term_p.vf(t, q, args)
+
+    def kicked(p_units, p_dot, force, force_dot, coefficient):
+        kick = term_p.prod(force, coefficient * h)
+        p_units, flag = lattice_moved(p_units, kick, lattice.p)
+        if p_dot is not None:
+            p_dot = _add(p_dot, term_p.prod(force_dot, coefficient * h))
+        return p_units, p_dot, flag
+
+    p_units, p_dot, flag = kicked(p_units, p_dot, force, force_dot, kicks[0])
     flags = [flag]
     clock = 0.0  # fraction of the step the drifts have covered so far
     for index, drift in enumerate(drifts):
         t_drift = t0 + (clock + drift / 2) * (t1 - t0)
         p_now = lattice.decode_p(p_units)
-        dq = term_q.vf_prod(t_drift, p_now, args, _scaled(control_q, drift))
-        q_units, flag = _moved(q_units, dq, lattice.q)
+        v, v_dot = _with_tangent(
+            lambda p, th, t=t_drift: velocity(p, th, t), p_now, params, p_dot,
+            params_dot,
+        )  # fmt: skip
+        q_units, flag = lattice_moved(q_units, term_q.prod(v, drift * h), lattice.q)
+        if q_dot is not None:
+            q_dot = _add(q_dot, term_q.prod(v_dot, drift * h))
         clock += drift
         last = index + 1 == len(drifts)
         t_kick = t1 if last else t0 + clock * (t1 - t0)
-        force = term_p.vf(t_kick, lattice.decode_q(q_units), args)
-        kick = term_p.prod(force, _scaled(control_p, kicks[index + 1]))
-        p_units, flag_p = _moved(p_units, kick, lattice.p)
+        q_now = lattice.decode_q(q_units)
+        force, force_dot = _with_tangent(
+            lambda q, th, t=t_kick: field(q, th, t), q_now, params, q_dot, params_dot
+        )
+        p_units, p_dot, flag_p = kicked(
+            p_units, p_dot, force, force_dot, kicks[index + 1]
+        )
         flags += [flag, flag_p]
     units = (q_units, p_units)
-    return units, force, _any(flags) | _outside(units)
+    return units, force, _any(flags) | _outside(units), (q_dot, p_dot, force_dot)
 
 
 @eqx.filter_custom_jvp
-def _straight_through_step(y0, force, params, t0, t1, units, lattice, nominal, *,
-                           solver, static):  # fmt: skip
-    """`(y1, force1, units1, overflow)`: the lattice step's values; its tangent
-    is the floating-point step's at y0 (`_straight_through_tangent`)."""
+def _straight_through_step(y0, force, params, times, units, lattice, *, method,
+                           static):  # fmt: skip
+    """`(y1, force1, units1, overflow)`: the lattice step's values; its tangent is
+    the table's, stage by stage at the lattice points (`_lattice_step`), the
+    rounding passed straight through."""
     del y0
-    terms, args = eqx.combine(params, static)
-    units, force, overflow = _lattice_step(
-        solver.method, terms, t0, t1, units, lattice, force, args, nominal
+    units, force, overflow, _ = _lattice_step(
+        method, params, static, times, units, lattice, force
     )
     y1 = (lattice.decode_q(units[0]), lattice.decode_p(units[1]))
     return y1, force, units, overflow
 
 
-@_straight_through_step.def_jvp
-def _straight_through_tangent(primals, tangents, *, solver, static):
-    y0, force, params, t0, t1 = primals[:5]
-    out = _straight_through_step(*primals, solver=solver, static=static)
-    floating = solver.floating_method()
-
-    def floating_step(y0, force, params, t0, t1):
-        terms, args = eqx.combine(params, static)
-        y1, _, _, (_, force1), _ = floating.step(
-            terms, t0, t1, y0, args, (None, force), False
-        )
-        return y1, force1
-
-    inputs = (y0, force, params, t0, t1)
-    materialised = jax.tree_util.tree_map(
+def _zeros_for(tree: Any, dot: Any) -> Any:
+    """`dot` with zeros where it has a symbolic zero (None) for an array."""
+    return jax.tree_util.tree_map(
         lambda x, t: t if x is None or t is not None else jnp.zeros_like(x),
-        inputs,
-        tangents[:5],
+        tree,
+        dot,
         is_leaf=lambda t: t is None,
     )
-    _, (y1_dot, force1_dot) = jax.jvp(floating_step, inputs, materialised)
-    no_tangent = jax.tree_util.tree_map(lambda _: None, out[2:])
-    return out, (y1_dot, force1_dot, *no_tangent)
+
+
+@_straight_through_step.def_jvp
+def _straight_through_tangent(primals, tangents, *, method, static):
+    # The times carry no tangent: a fixed step's count is fixed.
+    _, force, params, times, units, lattice = primals
+    y0_dot, force_dot, params_dot = (
+        _zeros_for(x, dot) for x, dot in zip(primals[:3], tangents[:3])
+    )
+    units, force, overflow, (q_dot, p_dot, force_dot) = _lattice_step(
+        method, params, static, times, units, lattice, force,
+        (*y0_dot, force_dot, params_dot),
+    )  # fmt: skip
+    y1 = (lattice.decode_q(units[0]), lattice.decode_p(units[1]))
+    no_tangent = jax.tree_util.tree_map(lambda _: None, (units, overflow))
+    return (y1, force, units, overflow), ((q_dot, p_dot), force_dot, *no_tangent)
 
 
 # (lattice spacings, (Q, P) in lattice units, kick vector field at the current q,
@@ -299,11 +338,6 @@ class BitReversible(
     def order(self, terms: Any) -> int | None:
         return self.method.order(terms)
 
-    def floating_method(self) -> AbstractSplittingSolver:
-        """The wrapped table in plain floating point: its step's derivative is
-        this solver's."""
-        return dataclasses.replace(self.method, compensated=False)
-
     def lattice(self, y0: Any) -> Lattice:
         """The lattice for a run from `y0 = (q0, p0)`."""
         q0, p0 = y0
@@ -349,17 +383,9 @@ class BitReversible(
             )
         params, static = eqx.partition((terms, args), eqx.is_inexact_array)
         y1, force, units, overflow = _straight_through_step(
-            y0,
-            force,
-            params,
-            t0,
-            t1,
-            units,
-            lattice,
-            nominal,
-            solver=self,
+            y0, force, params, (t0, t1, nominal), units, lattice, method=self.method,
             static=static,
-        )
+        )  # fmt: skip
         # Off the lattice the values mean nothing: poisoned, the run stops there as
         # a non-finite state (the message names the lattice's range among the
         # causes).
