@@ -68,6 +68,19 @@ Störmer–Verlet 2.69× → 2.72×, 2.71×, in one process). The backward step 
 transposed force per stage (Kepler: 37.5 kernels per Yoshida4 step back, 18.5
 forward); the rest is bookkeeping.
 
+`--bit-reversible` runs the Kepler rows with `lj.BitReversible(solver)`, the
+splitting on an integer lattice that the walk undoes to the last bit (no
+checkpoints by default). Issue 32, fourth pass (2 cores loaded by two other jobs,
+CPU time on one pinned core, minima of 5, 10⁶ steps): Störmer–Verlet 5.3 KiB of
+temporaries against the forward run's 3.8 KiB (1.39×) and the scan's 135 MiB,
+the gradient in 2.92× the forward run (161.6 against 55.4 ms), 8.6e-11 from the
+scan's gradient; Yoshida4 5.8 KiB against 4.1 KiB (1.41×) and 387 MiB, 2.53×
+(428.9 against 169.4 ms), 6.5e-11. The lattice run's forward step costs 1.9–2.4×
+the floating-point splitting's (Störmer–Verlet 29.3 ms, Yoshida4 81.4 ms at 10⁶
+steps in the same session), so against the floating-point forward run the
+gradient takes 5.5× and 5.3×. At 10⁴ steps the reversible gradient takes 0.96×
+(Störmer–Verlet) and 0.92× (Yoshida4) the scan's.
+
 Memory is XLA's temporary buffer size of the compiled gradient
 (`memory_analysis().temp_size_in_bytes`); time is the median and the minimum of
 repeats, variants alternated in rotating order (on a shared machine the minimum is
@@ -237,9 +250,11 @@ def kepler_functions(steps: int, solver, with_scan: bool, variants=None) -> dict
 
 
 def kepler_rows(
-    steps_list, repeats: int, solver_name: str, variants=None
+    steps_list, repeats: int, solver_name: str, variants=None, bit_reversible=False
 ) -> list[dict]:
     solver = getattr(lj, solver_name)()
+    if bit_reversible:
+        solver = lj.BitReversible(solver)
     argument = jnp.concatenate([KEPLER_START, jnp.array([1.0])])
     rows = []
     for steps in steps_list:
@@ -279,6 +294,9 @@ def main() -> None:
     parser.add_argument("--variants", nargs="*", default=None,
                         help="Kepler gradients to run (default: all of scan, "
                         "checkpoint, reversible, reversible-0)")  # fmt: skip
+    parser.add_argument("--bit-reversible", action="store_true",
+                        help="Kepler rows with lj.BitReversible(solver): the "
+                        "integer-lattice run, walked back exactly")  # fmt: skip
     parser.add_argument("--quick", action="store_true", help="CI size: seconds")
     parser.add_argument("--cpu-time", action="store_true",
                         help="time by the process's CPU time (a loaded machine, "
@@ -297,7 +315,8 @@ def main() -> None:
         print_rows(rows, "scan")
     if options.kepler is not None:
         steps = options.kepler or [10**3, 10**4, 10**5]
-        rows = kepler_rows(steps, options.repeats, options.solver, options.variants)
+        rows = kepler_rows(steps, options.repeats, options.solver, options.variants,
+                           options.bit_reversible)  # fmt: skip
         print(
             f"\nKepler e = 0.4, {options.solver}, dt = {KEPLER_DT}: loss on the final "
             f"and 10 saved states, gradient w.r.t. (q0, p0, mu), {platform}; "

@@ -22,9 +22,9 @@ Which runs: fixed steps (`dt`), the final state or `ts` — on the step grid
 in, from a state the run keeps there); the cotangents enter at the saved times.
 Dense output (`dense=True`) is refused: it keeps every step anyway.
 Which solvers: the symmetric ones, `lagjax._core.solver_kinds.
-AbstractTimeReversible` — the palindromic splittings, Gauss–Legendre and the
-implicit midpoint rule, the variational midpoint, RATTLE and the Lie–Poisson
-rigid-body splittings. Anything else is refused by name, at trace time.
+AbstractTimeReversible` — the palindromic splittings (and `lj.BitReversible`, the
+same on an integer lattice), Gauss–Legendre and the implicit midpoint rule, the
+variational midpoint, RATTLE and the Lie–Poisson rigid-body splittings. Anything else is refused by name, at trace time.
 
 Round-off. The states walked back differ from the forward run's by the round-off
 of the steps between. For a compensated solver (the default) the step back is
@@ -43,12 +43,16 @@ steps, against a long-double reference of the same map
 checkpoints, 5.8e-4 with K = 10, where the plain scan is itself 1.7e-3 from
 float64.
 
-The default spacing. The issue's targets at 10⁶ steps — gradients within 1e-10
-and peak temporary memory within 2× the forward-only run's — cannot both hold:
-the forward run's temporaries are a few KiB (7 KiB for Kepler, the reversible
-walk without checkpoints 1.9× that), so 2× leaves no room for a checkpoint every
-1000 steps (147 KiB), and without them the walk back is 1.6e-9–5.9e-9 off. The
-memory the default spends is a budget instead, `checkpoint_bytes` = 1 MiB: a
+The default spacing. For a floating-point solver the targets at 10⁶ steps —
+gradients within 1e-10 and peak temporary memory within 2× the forward-only
+run's — cannot both hold: the forward run's temporaries are a few KiB (7 KiB for
+Kepler, the reversible walk without checkpoints 1.9× that), so 2× leaves no room
+for a checkpoint every 1000 steps (147 KiB), and without them the walk back is
+1.6e-9–5.9e-9 off. `lj.BitReversible` removes the conflict: its steps are undone
+to the last bit on an integer lattice (`reversible_lattice`), so it keeps no
+checkpoint by default — Kepler over 10⁶ steps: 1.4× the forward run's
+temporaries, the gradient 9.8e-12 from a long-double reference (Störmer–Verlet).
+For the floating-point solvers the memory the default spends is a budget instead, `checkpoint_bytes` = 1 MiB: a
 checkpoint every max(1000, ⌈n·b/budget⌉) steps, b the bytes of one — K = 1000 up
 to n = 2²⁰·1000/b steps (13·10⁶ for Kepler's 80 bytes), wider beyond, so the
 memory stays within the budget however long the run; below 1000 steps, none. At
