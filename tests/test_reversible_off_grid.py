@@ -81,11 +81,25 @@ def test_off_grid_saves_are_the_plain_scans_and_match_finite_differences():
     assert abs(float(derivative - difference)) < 1e-7 * abs(float(derivative))
 
 
-def test_dense_output_is_refused_with_the_reason():
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
+@pytest.mark.parametrize(
+    "solver", [lj.Yoshida4(), lj.BitReversible(lj.Yoshida4()), lj.Yoshida6()]
+)
+def test_dense_output_cotangents_enter_at_every_step(solver):
+    # Cubic (Yoshida4) and quintic (Yoshida6) Hermite extensions, evaluated
+    # between steps: the reversible gradient is the stored run's.
     system, y0, mu = _kepler()
-    with pytest.raises(ValueError, match="dense output"):
-        lj.simulate(system, y0, t1=1.0, dt=0.01, dense=True, solver=lj.Yoshida4(),
-                    args=mu, adjoint=lj.ReversibleAdjoint())  # fmt: skip
+    between = jnp.array([0.333, 1.71, 2.777])
+
+    def loss(y0, mu, adjoint):
+        run = lj.simulate(system, y0, t1=3.0, dt=0.01, args=mu, solver=solver,
+                          dense=True, adjoint=adjoint)  # fmt: skip
+        q, p = jax.vmap(run.evaluate)(between)
+        return jnp.sum(q[:, 0] ** 2) + p[-1, 1]
+
+    stored = jax.grad(loss, argnums=(0, 1))(y0, mu, None)
+    walked = jax.grad(loss, argnums=(0, 1))(y0, mu, lj.ReversibleAdjoint())
+    assert _relative_gap(walked, stored) < 1e-13
 
 
 def test_checkpoint_budget_spacing():

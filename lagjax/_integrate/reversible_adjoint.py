@@ -20,7 +20,10 @@ Which runs: fixed steps (`dt`), the final state or `ts` — on the step grid
 (multiples of dt at a uniform spacing) or anywhere in [t0, t1], increasing
 (`reversible_off_grid`: the continuous extension over the step each time falls
 in, from a state the run keeps there); the cotangents enter at the saved times.
-Dense output (`dense=True`) is refused: it keeps every step anyway.
+Dense output (`dense=True`): every step's state is a mark (the output keeps
+them anyway) and the Hermite extension's slopes are evaluated from them after
+the run, so their cotangents enter the walk at every step; the memory is the
+output's, not the plain scan's stage points and residuals.
 Which solvers: the symmetric ones, `lagjax._core.solver_kinds.
 AbstractTimeReversible` — the palindromic splittings (and `lj.BitReversible`, the
 same on an integer lattice), Gauss–Legendre and the implicit midpoint rule, the
@@ -179,6 +182,33 @@ class ReversibleAdjoint(eqx.Module):
         taken = jnp.where(reached[0], jnp.asarray(positions)[last], 0)
         return ys, _run_result(results, states, reached), taken, saved
 
+    def every_step(self, terms, solver, t0, t1, dt, y0, args, dtype=float,
+                   states=True, dense=False):  # fmt: skip
+        """As `fixed_step_loop.integrate_every_step`: `(y1, ys, dense_infos,
+        result, steps_taken)`, each step's state a mark (the output keeps them
+        anyway), the dense information computed from them
+        (`HermiteDenseOutput.dense_information`): its cotangents enter the walk
+        back at every step."""
+        inner = solver.solver if dense else solver
+        steps = fixed_step_count(t0, t1, dt)
+        dt = math.copysign(abs(dt), t1 - t0)
+        clock = Clock(t0, dt, dtype, steps - 1, t1)
+        marks = Marks(0, 1, steps + 1)
+        kept, results, _ = reversible_run((y0, terms, args), inner, clock, marks)
+        reached = finite_marks(kept, results)
+        last = _last_good(reached)
+        good = jax.tree_util.tree_map(lambda x: x[last], kept)
+        held = jax.tree_util.tree_map(
+            lambda y, g: jnp.where(_column(reached, y), y, g), kept, good
+        )
+        infos = None
+        if dense:
+            starts = jax.vmap(lambda k: clock.times(k)[0])(jnp.arange(steps))
+            times = jnp.concatenate([starts, jnp.asarray([t1], dtype)])
+            infos = solver.dense_information(terms, times, held, args)
+        ys = jax.tree_util.tree_map(lambda x: x[1:], held) if states else None
+        return good, ys, infos, _run_result(results, kept, reached), last
+
     def off_grid_saves(self, terms, solver, dense_solver, t0, t1, dt, brackets,
                        most, ts, y0, args, dtype=float):  # fmt: skip
         """As `off_grid_saves.integrate_off_grid`: `(ys, result, steps, saved)`
@@ -255,17 +285,13 @@ def check_reversible_run(adjoint: Any, solver: diffrax.AbstractSolver, plan: Any
             "default adjoint or diffrax.RecursiveCheckpointAdjoint()."
         )
     saving = plan.saving() if mode.on_scan and not mode.on_step_grid else None
-    if saving is not None and saving.dense:
-        raise ValueError(
-            "ReversibleAdjoint does not take dense output (dense=True): it keeps "
-            "every step's dense information, as much memory as the default "
-            "adjoint's reverse mode, which differentiates it; save ts instead "
-            "(any times in [t0, t1]) to keep the reversible adjoint's memory."
-        )
     off_grid_ts = (
         saving is not None
-        and saving.schedule is not None
-        and not (saving.every or saving.t0 or saving.t1)
+        and not saving.every
+        and (
+            saving.dense
+            or (saving.schedule is not None and not (saving.t0 or saving.t1))
+        )
     )
     if plan.dt is None or not (mode.on_step_grid or off_grid_ts):
         raise ValueError(

@@ -18,6 +18,7 @@ import jax.numpy as jnp
 
 from lagjax._integrate.checks.run_verdict import NON_FINITE_MESSAGE
 from lagjax._integrate.fixed_step_loop import (
+    integrate_every_step,
     integrate_fixed_steps,
     integrate_fixed_steps_saving,
 )
@@ -39,18 +40,20 @@ def integrate_on_scans(terms, solver, state0, args, run: RunPlan, mode: Saving):
     """
     step = grid_step(run.t0, run.t1, run.dt, run.dtype)
     interpolation = None
-    fixed_steps, fixed_steps_saving, off_grid = (
+    fixed_steps, fixed_steps_saving, off_grid, every_step = (
         (run.adjoint.fixed_steps, run.adjoint.fixed_steps_saving,
-         run.adjoint.off_grid_saves)
+         run.adjoint.off_grid_saves, run.adjoint.every_step)
         if isinstance(run.adjoint, ReversibleAdjoint)
-        else (integrate_fixed_steps, integrate_fixed_steps_saving, integrate_off_grid)
+        else (integrate_fixed_steps, integrate_fixed_steps_saving, integrate_off_grid,
+              integrate_every_step)
     )  # fmt: skip
     if mode is Saving.BETWEEN_STEPS:
         plan = run.saving()
         assert plan is not None  # saving_mode() checked it
         saved_ts, ys, result, steps, interpolation = integrate_saving(
-            terms, solver, state0, args, plan, run.t0, run.t1, run.dtype, off_grid
-        )
+            terms, solver, state0, args, plan, run.t0, run.t1, run.dtype, off_grid,
+            every_step,
+        )  # fmt: skip
     elif mode is Saving.FINAL_STATE:
         y1, result, steps = fixed_steps(
             terms, solver, run.t0, run.t1, step, state0, args, run.dtype

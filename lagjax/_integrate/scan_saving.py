@@ -113,10 +113,11 @@ def scan_saving(
 
 
 def integrate_saving(terms, solver, state0, args, plan: ScanSaving, t0, t1, dtype,
-                     off_grid=integrate_off_grid):  # fmt: skip
+                     off_grid=integrate_off_grid,
+                     every_step=integrate_every_step):  # fmt: skip
     """Run the scans of `plan`: `(saved_ts, ys, result, steps_taken, interpolation)`;
-    `off_grid` saves `ts` off the step grid (`ReversibleAdjoint.off_grid_saves`
-    under that adjoint)."""
+    `off_grid` saves `ts` off the step grid and `every_step` keeps every step
+    (`ReversibleAdjoint.off_grid_saves` and `.every_step` under that adjoint)."""
     step, direction = plan.step, 1 if t1 > t0 else -1
     parts = []  # (times, states, saved) in diffeqsolve's order
     if plan.t0:
@@ -124,7 +125,7 @@ def integrate_saving(terms, solver, state0, args, plan: ScanSaving, t0, t1, dtyp
     interpolation = None
     if plan.dense or plan.every:
         dense_solver = with_dense_output(solver, terms) if plan.dense else solver
-        y1, ys, infos, result, taken = integrate_every_step(
+        y1, ys, infos, result, taken = every_step(
             terms, dense_solver, t0, t1, step, state0, args, dtype,
             states=bool(plan.every), dense=plan.dense,
         )  # fmt: skip

@@ -184,6 +184,36 @@ class HermiteDenseOutput(diffrax.AbstractWrappedSolver):
     def func(self, terms, t0, y0, args):
         return self.solver.func(terms, t0, y0, args)
 
+    def dense_information(self, terms, times, ys, args) -> dict[str, Any]:
+        """The dense information of every step of a run from its states `ys` at
+        `times` (stacked, one more than the steps), as `step` gives it step by
+        step: for a run whose states were kept without it (the reversible
+        adjoint)."""
+        derivatives = jax.vmap(lambda t, y: self._derivatives(terms, t, y, args))(
+            times, ys
+        )
+        h = times[1:] - times[:-1]
+
+        def scaled(tree, power, part):
+            return jax.tree_util.tree_map(
+                lambda x: (x[part] * _column(h, x[part]) ** power).astype(x.dtype),
+                tree,
+            )
+
+        first, last = slice(None, -1), slice(1, None)
+        pick = lambda tree, part: jax.tree_util.tree_map(lambda x: x[part], tree)
+        info = dict(
+            y0=pick(ys, first),
+            y1=pick(ys, last),
+            k0=scaled(derivatives[0], 1, first),
+            k1=scaled(derivatives[0], 1, last),
+        )
+        if self.quintic:
+            info.update(
+                m0=scaled(derivatives[1], 2, first), m1=scaled(derivatives[1], 2, last)
+            )
+        return info
+
     def state_at(self, terms, t, y, args, inner):
         """This solver's state at (t, y) from the wrapped solver's state `inner`:
         a step taken from there gives the same dense information as one inside a
@@ -194,6 +224,10 @@ class HermiteDenseOutput(diffrax.AbstractWrappedSolver):
     def inner_state(state):
         """The wrapped solver's state within this solver's."""
         return state[0]
+
+
+def _column(h: jax.Array, like: jax.Array) -> jax.Array:
+    return h.reshape(h.shape + (1,) * (like.ndim - 1))
 
 
 def _fraction_of_step(start: Any, t: Any, end: Any) -> Any:
