@@ -191,3 +191,18 @@ def test_selects_with_numeric_predicates_pick_their_case():
         + np.sin(y)
     )
     np.testing.assert_allclose(rhs(y), expected, rtol=1e-15, atol=1e-15)
+
+
+def test_powers_of_a_zero_base_stay_finite():
+    """q³ and q⁴ of an oscillator launched from its equilibrium q = 0: heyoka's
+    real-exponent pow divides by the base there (err_nf_state); the translation's
+    products of squares keep the run, and its energy, exact."""
+    anharmonic = lj.Lagrangian(
+        lambda q, v: 0.5 * v**2 - 0.5 * q**2 - q**3 / 3 - 0.25 * q**4
+    )
+    run = lj.simulate(anharmonic, (0.0, 1.0), t1=2.0, ts=np.linspace(0.0, 2.0, 5),
+                      rtol=1e-15, atol=1e-15, solver=lj.Taylor(backend="heyoka"))  # fmt: skip
+    q, v = np.asarray(run.q), np.asarray(run.qdot)
+    energy = 0.5 * v**2 + 0.5 * q**2 + q**3 / 3 + 0.25 * q**4
+    assert np.all(np.isfinite(q)) and np.ptp(q) > 0.5
+    np.testing.assert_allclose(energy, 0.5, rtol=0, atol=1e-13)

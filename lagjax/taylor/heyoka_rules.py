@@ -167,8 +167,21 @@ def _select_n(walk: Walk, eqn: Any, operands: list[Any]) -> list[Any]:
 
 
 def _integer_pow(walk: Walk, eqn: Any, operands: list[Any]) -> list[Any]:
-    y = eqn.params["y"]
-    return [element_map(lambda a: a**y, operands)]
+    """x**n; of an expression, n ≥ 3 as products of heyoka's squares: heyoka's
+    `pow` with a real exponent has Taylor recurrences that divide by the base,
+    NaN where it is zero (heyoka 7.13: `x**3` from x = 0 ends in err_nf_state,
+    so did the FPU chain from rest), while squares and products are exact there."""
+    n, expression = eqn.params["y"], walk.hy.expression
+
+    def power(a: Any, n: int) -> Any:
+        if n == 1:
+            return a
+        if n < 3 or not isinstance(a, expression):
+            return a**n
+        half = power(a, n // 2)
+        return half * half * a if n % 2 else half * half
+
+    return [element_map(lambda a: power(a, n), operands)]
 
 
 def _convert(walk: Walk, eqn: Any, operands: list[Any]) -> list[Any]:
