@@ -72,14 +72,14 @@ forward); the rest is bookkeeping.
 splitting on an integer lattice that the walk undoes to the last bit (no
 checkpoints by default). Issue 32, fourth pass (2 cores loaded by two other jobs,
 CPU time on one pinned core, minima of 5, 10⁶ steps): Störmer–Verlet 5.3 KiB of
-temporaries against the forward run's 3.8 KiB (1.39×) and the scan's 135 MiB,
-the gradient in 2.92× the forward run (161.6 against 55.4 ms), 8.6e-11 from the
-scan's gradient; Yoshida4 5.8 KiB against 4.1 KiB (1.41×) and 387 MiB, 2.53×
-(428.9 against 169.4 ms), 6.5e-11. The lattice run's forward step costs 1.9–2.4×
-the floating-point splitting's (Störmer–Verlet 29.3 ms, Yoshida4 81.4 ms at 10⁶
-steps in the same session), so against the floating-point forward run the
-gradient takes 5.5× and 5.3×. At 10⁴ steps the reversible gradient takes 0.96×
-(Störmer–Verlet) and 0.92× (Yoshida4) the scan's.
+temporaries against the forward run's 3.7 KiB (1.4×) and the scan's 135 MiB,
+the gradient in 2.66× the forward run (157.6 against 59.2 ms), 8.6e-11 from the
+scan's gradient; Yoshida4 5.8 KiB against 3.9 KiB (1.5×) and 387 MiB, 2.54×
+(404.6 against 159.6 ms), 6.5e-11. The lattice run's forward costs 1.97× and
+1.88× the floating-point splitting's (30.0 and 84.7 ms in the same session), so
+against the floating-point forward run the gradient takes 5.2× and 4.8×. At 10⁴
+steps the reversible gradient takes 0.96× (Störmer–Verlet) and 0.92× (Yoshida4)
+the scan's.
 
 Memory is XLA's temporary buffer size of the compiled gradient
 (`memory_analysis().temp_size_in_bytes`); time is the median and the minimum of
