@@ -119,23 +119,11 @@ def lattice_states(steps: int, solver: lj.BitReversible) -> np.ndarray:
             )
             return (y1, state), jnp.concatenate(y)
 
-        return jax.lax.scan(one, (y, state), jnp.arange(steps))[1]
-
-    @jax.jit
-    def run_to_end(y, state):
-        def one(carry, k):
-            y, state = carry
-            y1, _, _, state, _ = solver.step(
-                terms, k * h, (k + 1) * h, y, mu, state, False
-            )
-            return (y1, state), None
-
-        return jnp.concatenate(jax.lax.scan(one, (y, state), jnp.arange(steps))[0][0])
+        (last, _), before = jax.lax.scan(one, (y, state), jnp.arange(steps))
+        return jnp.concatenate([before, jnp.concatenate(last)[None]])
 
     first = (state[0].decode_q(state[1][0]), state[0].decode_p(state[1][1]))
-    before = np.asarray(run(first, state))
-    last = np.asarray(run_to_end(first, state))
-    return np.concatenate([before, last[None]])
+    return np.asarray(run(first, state))
 
 
 def long_double_gradient(steps: int, solver, along=None) -> np.ndarray:

@@ -30,9 +30,10 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from lagjax._integrate.reversible_splitting import SplittingCotangent
-from lagjax._integrate.reversible_steps import repeat_steps
-from lagjax._integrate.scan_body import steps_per_trip
+from lagjax._integrate.reversible_splitting import (
+    SplittingCotangent,
+    walk_steps_back,
+)
 from lagjax.solvers.bit_reversible import BitReversible, lattice_moved, step_size
 
 
@@ -95,19 +96,13 @@ class LatticeWalk(eqx.Module):
         """Walk back `length` steps from `(y, state)` after step `end` − 1; the
         cotangent `saved = (q̄, p̄)` of the state reached enters there (None: no
         mark)."""
-        low = end - length
-        saved = _zeros(y) if saved is None else saved
 
-        def one_back(carry):
-            y, state, k, cotangent = carry
-            y, state, cotangent = self._step_back(
-                state, k - 1, cotangent, params, saved, k - 1 == low
-            )
-            return y, state, k - 1, cotangent
+        def step_back(y, state, step, cotangent, saved, at_mark):
+            del y  # the lattice state holds it, exactly
+            return self._step_back(state, step, cotangent, params, saved, at_mark)
 
-        carry = (y, state, jnp.asarray(end), cotangent)
-        carry = repeat_steps(one_back, carry, length, steps_per_trip(self.solver))
-        return carry[-1]
+        return walk_steps_back(step_back, cotangent, y, state, end, length,
+                               saved, self.solver)  # fmt: skip
 
     def finish(self, cotangent: Any, params):
         """`(ȳ0, θ̄)`: the first step's pullback already took the initial force's."""

@@ -82,6 +82,23 @@ def _scaled(tree: Any, factor: Any) -> Any:
     return jax.tree_util.tree_map(lambda x: factor * x, tree)
 
 
+def walk_steps_back(step_back, cotangent, y, state, end, length, saved, solver):
+    """The cotangent after `length` calls of `step_back(y, state, step, cotangent,
+    saved, at_mark) -> (y, state, cotangent)` from step `end` − 1 down, `saved`
+    (None: zeros) entering at the lowest step, unrolled as the forward loop is
+    (a traced length: not unrolled)."""
+    low = end - length
+    saved = _zeros(y) if saved is None else saved
+
+    def one_back(carry):
+        y, state, k, cotangent = carry
+        y, state, cotangent = step_back(y, state, k - 1, cotangent, saved, k - 1 == low)
+        return y, state, k - 1, cotangent
+
+    carry = (y, state, jnp.asarray(end), cotangent)
+    return repeat_steps(one_back, carry, length, steps_per_trip(solver))[-1]
+
+
 class SplittingWalk(eqx.Module):
     """The backward pass of one splitting run: `start` at the last mark, `back`
     over the steps between marks, `finish` at y0 (`reversible_loop` drives it)."""
@@ -139,20 +156,12 @@ class SplittingWalk(eqx.Module):
         """Walk back `length` steps from `(y, state)` after step `end` − 1; the
         cotangent `saved = (q̄, p̄)` of the state reached enters there (None: no
         mark)."""
-        low = end - length
-        saved = _zeros(y) if saved is None else saved
 
-        def one_back(carry):
-            y, state, k, cotangent = carry
-            y, state, cotangent = self._step_back(
-                y, state, k - 1, cotangent, params, saved, k - 1 == low
-            )
-            return y, state, k - 1, cotangent
+        def step_back(y, state, step, cotangent, saved, at_mark):
+            return self._step_back(y, state, step, cotangent, params, saved, at_mark)
 
-        # Unrolled as the forward loop is (a traced length: not unrolled).
-        carry = (y, state, jnp.asarray(end), cotangent)
-        carry = repeat_steps(one_back, carry, length, steps_per_trip(self.solver))
-        return carry[-1]
+        return walk_steps_back(step_back, cotangent, y, state, end, length,
+                               saved, self.solver)  # fmt: skip
 
     def finish(self, cotangent: Any, params):
         """`(ȳ0, θ̄)`: the first step's pullback already took the initial force's."""
