@@ -186,7 +186,11 @@ def _compiled_run(system, y0, args, solver, t0, ds, save_ts, max_steps):
                 (y1, solver_state),
                 (carry.y, carry.solver_state),
             )
-        passed = jnp.searchsorted(save_ts, _time(y1), side="right")
+        # compare_all: one fused comparison; the default method is a while loop
+        # of log2(saves) trips inside every step.
+        passed = jnp.searchsorted(
+            save_ts, _time(y1), side="right", method="compare_all"
+        ).astype(jnp.int32)
         # The start of a step that crosses save times goes to the first one's slot;
         # a refused step records nothing (at t0 it would pass a save time at t0).
         passed = jnp.where(accepted, passed, carry.next_save)

@@ -221,7 +221,13 @@ def _dot_general(
         for i in np.ndindex(*lf_shape):
             for j in np.ndindex(*rf_shape):
                 products = lhs[(*b, *i)] * rhs[(*b, *j)]
-                out[(*b, *i, *j)] = _fold(np.asarray(products, dtype=object), lax.add)
+                # No contracted axis (an outer product, as in a gradient's
+                # transposed dot): one product, a JAX scalar, no array to sum.
+                out[(*b, *i, *j)] = (
+                    _fold(products, lax.add)
+                    if isinstance(products, np.ndarray)
+                    else products
+                )
     return out
 
 
@@ -339,15 +345,29 @@ def scalarize(fn: Callable[..., jax.Array], *example: Any) -> Callable | None:
     with. The twin takes, for each argument, an object array of that shape holding
     JAX scalars, and returns the scalar result built from scalar operations only.
     """
+    twin = scalarize_outputs(fn, *example)
+    if twin is None:
+        return None
+
+    def scalar_fn(*object_arrays: np.ndarray) -> Any:
+        (result,) = twin(*object_arrays)
+        return result[()]
+
+    return scalar_fn
+
+
+def scalarize_outputs(fn: Callable[..., Any], *example: Any) -> Callable | None:
+    """As `scalarize`, for a `fn` of several outputs (a value and its gradient):
+    the twin returns the list of `fn`'s flattened outputs, each an object array
+    of JAX scalars."""
     closed = jax.make_jaxpr(fn)(*example)
     try:
         _check(closed.jaxpr)
     except _Unsupported:
         return None
 
-    def scalar_fn(*object_arrays: np.ndarray) -> Any:
-        (result,) = _evaluate(closed.jaxpr, closed.consts, object_arrays)
-        return result[()]
+    def scalar_fn(*object_arrays: np.ndarray) -> list[np.ndarray]:
+        return _evaluate(closed.jaxpr, closed.consts, object_arrays)
 
     return scalar_fn
 
