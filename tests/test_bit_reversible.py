@@ -175,3 +175,10 @@ def test_bad_arguments_are_refused_by_name():
         lj.BitReversible(lj.Yoshida4(), q_range=0.0)
     with pytest.raises(ValueError, match="headroom"):
         lj.BitReversible(lj.Yoshida4(), headroom=0.5)
+
+
+def test_without_x64_it_is_refused_by_name():
+    pendulum = _pendulum()
+    with jax.enable_x64(False), pytest.raises(ValueError, match="jax_enable_x64"):
+        lj.simulate(pendulum, (jnp.asarray(1.0), jnp.asarray(0.0)), t1=0.1,
+                    dt=0.01, solver=lj.BitReversible(lj.StormerVerlet()))  # fmt: skip

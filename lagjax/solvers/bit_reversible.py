@@ -359,6 +359,12 @@ class BitReversible(
         )
 
     def init(self, terms, t0, t1, y0, args) -> _LatticeState:
+        if not jax.config.read("jax_enable_x64"):
+            # Without x64, JAX makes int64 arrays int32: the lattice would wrap.
+            raise ValueError(
+                "BitReversible keeps q and p as int64 lattice units, which needs "
+                'jax.config.update("jax_enable_x64", True)'
+            )
         lattice = self.lattice(y0)
         units = lattice.encode(y0)
         force = self._force_at(terms, t0, y0, lattice, units, args)
