@@ -11,7 +11,8 @@ import pytest
 from jax.flatten_util import ravel_pytree
 
 import lagjax as lj
-from lagjax.solvers.time_transformed import extended_state
+from lagjax._integrate.time_transformed_run import _check_step_count
+from lagjax.solvers.time_transformed import extended_state, start_weights
 
 PERIOD = 2 * np.pi  # a = 1, GM = 1
 
@@ -242,6 +243,21 @@ def test_step_count_is_judged_from_the_physical_step():
     solver = lj.TimeTransformed(lj.Yoshida4())
     with pytest.raises(ValueError, match=r"physical step of 1\.689\d*e-05"):
         lj.simulate(system, y0, t1=1e6, dt=1e-9, solver=solver)  # 6e10 steps
+
+
+def test_step_count_is_judged_from_the_orbits_mean_pace():
+    """From the pericentre of e = 0.9999, dt/ds = r = 1e-4: at that pace
+    ds = 0.05 over 1000 periods would be 1.3e9 steps, but the orbit's mean pace
+    (⟨r⟩ ~ a = 1) makes it 1.3e5, which runs; an unbound start (E ≥ 0) has no mean
+    pace and is judged at the start's."""
+    solver = lj.TimeTransformed(lj.Yoshida4())
+    span = 1000 * 2 * np.pi
+    weight0, mean = start_weights(solver, kepler(), pericentre_state(0.9999), 0.0, None)
+    # E = v²/2 − 1/r cancels terms of 1e4: its round-off is 1e-12 of 1e4.
+    assert abs(float(mean) - 1.0) < 1e-9 and abs(float(weight0) - 1e-4) < 1e-12
+    _check_step_count(solver, 0.0, span, 0.05, weight0, mean)  # not refused
+    with pytest.raises(ValueError, match=r"about 1\.26e\+09 steps"):
+        _check_step_count(solver, 0.0, span, 0.05, weight0, jnp.nan)
 
 
 @pytest.mark.integration  # compile-heavy: CI runs it in its integration step

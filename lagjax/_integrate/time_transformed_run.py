@@ -47,7 +47,7 @@ from lagjax._integrate.checks.inputs import MAX_FIXED_STEPS, check_simulate_inpu
 from lagjax.solvers.time_transformed import (
     TimeTransformed,
     extended_state,
-    start_weight,
+    start_weights,
 )
 from lagjax.trajectory import Trajectory
 
@@ -86,14 +86,14 @@ def run_time_transformed(
     except ValueError as error:
         raise ValueError(f"{solver.name} needs H = T(p) + V(q): {error}") from None
     y0, args = cast_floats(y0, dtype), cast_floats(args, dtype)
-    weight0 = start_weight(solver, integrated, y0, t0, args)
+    weight0, mean_weight = start_weights(solver, integrated, y0, t0, args)
     if not isinstance(weight0, Tracer) and not (np.isfinite(weight0) and weight0 > 0):
         raise ValueError(
             f"{solver.name}: the weight w(−V) = dt/ds is {float(weight0)} at the "
             "start; it must be positive and finite (the logarithmic Hamiltonian "
             "needs V(q0) < 0, an attractive potential that vanishes at infinity)"
         )
-    _check_step_count(solver, t0, t1, ds, weight0)
+    _check_step_count(solver, t0, t1, ds, weight0, mean_weight)
     save_ts = jnp.reshape(jnp.asarray(t1 if ts is None else ts, dtype=dtype), (-1,))
     trajectory = _compiled_run(
         integrated, y0, args, solver, jnp.asarray(t0, dtype), jnp.asarray(ds, dtype),
@@ -127,17 +127,22 @@ def check_no_tolerances_for(solver: TimeTransformed, given: dict[str, Any]) -> N
 
 
 def _check_step_count(solver: TimeTransformed, t0: Any, t1: Any, ds: Any,
-                      weight0: Any) -> None:  # fmt: skip
-    """Refuse a fictitious step that would take ≥ 10⁹ steps at the start's pace
-    dt = w(−V₀)·ds (in days and AU, ds = 1e-6 is a step of a few days)."""
-    values = (t0, t1, ds, weight0)
+                      weight0: Any, mean_weight: Any) -> None:  # fmt: skip
+    """Refuse a fictitious step that would take ≥ 10⁹ steps (in days and AU,
+    ds = 1e-6 is a step of a few days), at the faster of the start's pace
+    dt = w(−V₀)·ds and a bound orbit's mean pace w(−2E)·ds: from the pericentre
+    of Kepler's e = 0.9999 the start's pace alone is 10⁴ times too slow."""
+    values = (t0, t1, ds, weight0, mean_weight)
     if any(isinstance(value, Tracer) for value in values):
         return
-    steps = (float(t1) - float(t0)) / (float(ds) * float(weight0))
+    pace = float(weight0)
+    if np.isfinite(mean_weight) and float(mean_weight) > pace:
+        pace = float(mean_weight)
+    steps = (float(t1) - float(t0)) / (float(ds) * pace)
     if steps > MAX_FIXED_STEPS:
         raise ValueError(
             f"{solver.name}: ds = {float(ds):g} is a physical step of "
-            f"{float(ds) * float(weight0):g} at the start (dt = w(−V)·ds), so "
+            f"{float(ds) * pace:g} (dt = w(−V)·ds), so "
             f"[{float(t0):g}, {float(t1):g}] would take about {steps:.3g} steps, "
             f"more than {MAX_FIXED_STEPS:.0e}: pass a larger dt (the fictitious step)"
         )

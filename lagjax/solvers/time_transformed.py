@@ -193,10 +193,15 @@ def extended_state(
 
 
 @eqx.filter_jit
-def start_weight(
+def start_weights(
     solver: TimeTransformed, system: SeparableEnergies, y0: Any, t0: Any, args: Any
-) -> jax.Array:
-    """w(−V(q0, t0)): dt/ds at the start, which must be positive and finite.
-    Compiled: evaluated op by op, a pair potential took a third of a short run's
-    time (one dispatch per array operation)."""
-    return solver.weight(-system.potential_energy(y0[0], t0, args))
+) -> tuple[jax.Array, jax.Array]:
+    """(w(−V(q0, t0)), w(−2E)): dt/ds at the start, which must be positive and
+    finite, and on a bound orbit's average (virial theorem: ⟨−V⟩ = −2E for a
+    Kepler orbit; NaN where E ≥ 0). Compiled: evaluated op by op, a pair
+    potential took a third of a short run's time (one dispatch per operation)."""
+    q0, p0 = y0
+    potential = system.potential_energy(q0, t0, args)
+    energy = system.kinetic_energy(p0, t0, args) + potential
+    mean = jnp.where(energy < 0, solver.weight(jnp.abs(2 * energy)), jnp.nan)
+    return solver.weight(-potential), mean
