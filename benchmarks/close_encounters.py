@@ -14,9 +14,13 @@ the inherited affinity: `taskset -c 1` holds):
 - peers, where importable: REBOUND's IAS15 (`rebound>=4`, the `bench` extra) and
   heyoka's Taylor method on hand-written equations (tol 1e-16);
 - full mode: a hand-written JAX twin of `TimeTransformed(Yoshida4)` at ds = 0.005
-  (the same compensated steps, no saves), for the time per step.
+  (the same compensated steps, no saves), for the time per step;
+- `--extrapolation`: only GBS (1, 2, 4, 8) at tol 1e-12, 1e-13 and 1e-14, at 1e-13
+  also inside `jax.jit` and as its hand-written twin (`benchmarks.extrapolation_twin`:
+  the same steps, no saves), the peers, and per GBS row its steps, refused steps,
+  sweeps, leapfrog substeps and time per step and per substep.
 
-Columns: warm run time (median of three; compilation apart), steps, the largest
+Columns: warm run time (median of five, one with `--quick`; compilation apart), steps, the largest
 relative energy error over the saves and at t = 70, the largest |total momentum|
 and |angular momentum| (zero at the start), the position difference at t = 30
 from IAS15 (the chaotic run's state after the first encounters), and the escape:
@@ -25,34 +29,41 @@ escapes) and whether its distance from the binary grows over the last ten time
 units. `--quick` runs to t = 30 only (before the escape), one ds per table and
 one extrapolation row, no JAX-route Taylor row.
 
-Measured (one core of a 2-core machine shared with other jobs, load ≈ 10: every
-time here is inflated, heyoka's 15× over its quiet 3–4 ms; read the ratios):
+`--extrapolation`, 2026-11-27, core 1 pinned, load ≈ 3.6 (another job on the
+same core: every time inflated about threefold, heyoka's 46 ms against its quiet
+14–19 ms; read the ratios, all from one run):
 
-| method | time | / heyoka | energy max | Δq(t=30) vs IAS15 |
-|---|---|---|---|---|
-| TimeTransformed(Yoshida4) ds = 0.005 (388,118 steps) | 789 ms | 13 | 2.1e-13 | 3.7e-9 |
-| TimeTransformed(Yoshida6) ds = 0.005 | 1244 ms | 21 | 4.0e-13 | 3.7e-9 |
-| TimeTransformed(KahanLi8) ds = 0.025 | 1256 ms | 21 | 8.1e-13 | 3.7e-9 |
-| GBS 1,2,4,8 tol = 1e-13 (≈ 3,400 steps) | 156 ms | 2.6 | 5.1e-13 | 3.7e-9 |
-| GBS 1,2,4,8 tol = 3e-14 | 91 ms | 1.5 | 8.7e-13 | 3.7e-9 |
-| GBS 1,2,4 tol = 1e-13 | 127 ms | 2.2 | 9.4e-13 | 3.7e-9 |
-| GBS 1,2,3,4,5,6 tol = 1e-13 | 82 ms | 1.4 | 6.0e-12 | 3.7e-9 |
-| REBOUND IAS15 | 160 ms | 2.7 | 9.9e-11 | 0 |
-| heyoka tol = 1e-16 | 59 ms | 1 | 1.4e-9 | 5.5e-8 |
+| GBS 1,2,4,8 | time | / heyoka | / IAS15 | steps (refused) | energy max | Δq(t=30) |
+|---|---|---|---|---|---|---|
+| tol 1e-12 | 47.3 ms | 1.02 | 0.33 | 2,485 (191) | 1.3e-11 | 3.7e-9 |
+| tol 1e-13 | 59.9 ms | 1.29 | 0.42 | 3,393 (209) | 8.3e-13 | 3.7e-9 |
+| tol 1e-14 | 60.3 ms | 1.30 | 0.42 | 4,599 (183) | 1.9e-13 | 3.7e-9 |
+| tol 1e-13 inside `jax.jit` | 31.8 ms | 0.69 | 0.22 | 3,393 (209) | 3.1e-12 | 3.7e-9 |
+| its hand-written twin | 19.9 ms | 0.43 | 0.14 | 3,393 (209) | | |
+| REBOUND IAS15 | 142.5 ms | 3.1 | 1 | | 9.9e-11 | 0 |
+| heyoka tol 1e-16 | 46.3 ms | 1 | | | 1.4e-9 | 5.5e-8 |
 
-Per step (`TimeTransformed(Yoshida4)`, ds = 0.005, the same 388,118 steps, one
-run): the library 1.39 µs, its hand-written twin 0.57 µs (2.5×), plain
-`Yoshida4` in t 0.80 µs. Interleaved runs put the time transformation (extended
-state, weights, run loop) at 10–25 % over plain `Yoshida4` (0.84–1.0 against
-0.70–0.80 µs); the saves (one or 71: the same time) and the kick's ∂V/∂t (≤ 10 %)
-are not it. The rest of the gap is shared with plain `Yoshida4`: the splitting
-engine and the autodiff force (`pair_energy`) against the twin's hand-written one.
+Per step of 8 sweeps (15 leapfrog substeps over the 4 lanes): the compiled loop
+9.4 µs (625 ns a substep), the twin 5.9 µs (391 ns): 1.6×, from 4–5× before the
+kick and drift were taken on scalars (`lagjax._linalg.scalar_value_and_gradient`)
+and the sweeps rolled into one loop. An eager `simulate` call adds its checks (a
+few ms on a quiet core, about 28 ms here). The energy error is set by the
+tolerance above 2e-13 (about 13× tol) and by round-off below: over tol 1e-13 …
+1e-14 it falls anywhere in 2e-13–3e-12 with the rounding of the compiled program
+(the same 3,393 steps give 8.3e-13 eagerly and 3.1e-12 under `jax.jit`), so the
+1e-12 target is met on average, not robustly.
+
+Earlier (the full mode, load ≈ 10, before the scalar kick): the fixed-step tables
+need 10⁵ steps for the same energy — `TimeTransformed(Yoshida4)` at ds = 0.005,
+388,118 steps, 2.1e-13, 13× heyoka; Yoshida6 21×, KahanLi8 at ds = 0.025 21× —
+and per step the library took 1.39 µs against its hand-written twin's 0.57 µs.
 
 Every row keeps |P| and |L| below 1e-12 and sees the lightest body escape
 (E_rel ≈ +5.28). The extrapolation's energy error is set by round-off at the
-encounters, which the tableau's weights multiply: the harmonic sequences
-(Σ|cⱼ| 6–30) stay at 6e-12–1e-11 whatever the tolerance, Romberg's 1, 2, 4, 8
-(Σ|cⱼ| = 2) reaches 5e-13–9e-13 at tol ≤ 1e-13 (1.4e-11 at 1e-12).
+encounters, which the tableau's weights multiply and long steps enlarge: at tol
+1e-13 the harmonic 1..6 (Σ|cⱼ| = 26) gave 6e-12, and the well-conditioned but
+longer-stepping 1,2,4,6 (3.3), 1,2,3,5,8 (3.5) and 1,2,4,8,16 (2.0) 3e-12–7e-12;
+only Romberg's 1, 2, 4, 8 (Σ|cⱼ| = 2, 8 sweeps a step) reaches ~1e-12.
 
 References: Szebehely & Peters, AJ 72, 876 (1967); Mikkola & Tanikawa, Celest.
 Mech. 74, 287 (1999); Mikkola & Aarseth, Celest. Mech. 84, 343 (2002); Rein &
@@ -74,12 +85,15 @@ import jax.numpy as jnp
 import numpy as np
 
 import lagjax as lj
+from benchmarks.extrapolation_twin import gbs_twin_run, jitted_lagjax_run
 from benchmarks.state_timing import timed
 from lagjax.scenes.pythagorean import PythagoreanThreeBody
 from lagjax.solvers.extrapolation import GraggBulirschStoer
 from lagjax.solvers.splitting_tables import YOSHIDA4_WEIGHTS
 
 COMPARE_AT = 30
+# rtol = atol of the `--extrapolation` rows (GBS 1, 2, 4, 8).
+TOLERANCE_SWEEP = (1e-12, 1e-13, 1e-14)
 # (substeps n_1..n_k, rtol = atol) of the Gragg–Bulirsch–Stoer rows in the full run.
 EXTRAPOLATION_ROWS = (
     ((1, 2, 4, 8), 1e-13),
@@ -118,6 +132,7 @@ def lagjax_run(scene, ts: np.ndarray, solver, **options) -> Callable:
         traj = lj.simulate(scene, y0, t1=float(ts[-1]), ts=ts, solver=solver,
                            **options)  # fmt: skip
         run.steps = int(traj.stats.get("num_steps", -1))  # pyright: ignore
+        run.rejected = int(traj.stats.get("num_rejected_steps", 0))  # pyright: ignore
         return np.asarray(traj.q), np.asarray(traj.p)
 
     return run
@@ -279,6 +294,48 @@ def runs(scene, ts: np.ndarray, quick: bool) -> dict[str, Callable | None]:
     return rows
 
 
+def extrapolation_runs(scene, ts: np.ndarray) -> dict[str, Callable | None]:
+    """`--extrapolation`: GBS (1, 2, 4, 8) at tolerances 1e-12 … 1e-14 through
+    `simulate`, at 1e-13 also inside `jax.jit` and as its hand-written twin,
+    against the peers."""
+    rows: dict[str, Callable | None] = {}
+    for tol in TOLERANCE_SWEEP:
+        solver = lj.TimeTransformed(GraggBulirschStoer(rtol=tol, atol=tol))
+        rows[f"TimeTransformed(GBS 1,2,4,8) tol={tol:.0e}"] = lagjax_run(
+            scene, ts, solver, dt=0.1
+        )
+    solver = lj.TimeTransformed(GraggBulirschStoer(rtol=1e-13, atol=1e-13))
+    rows["GBS 1,2,4,8 tol=1e-13 in jax.jit"] = jitted_lagjax_run(scene, ts, solver, 0.1)
+    rows["twin of GBS 1,2,4,8 tol=1e-13"] = gbs_twin_run(
+        scene, float(ts[-1]), (1, 2, 4, 8), 1e-13
+    )
+    rows["REBOUND IAS15"] = rebound_run(scene, ts)
+    rows["heyoka tol=1e-16"] = heyoka_run(scene, ts)
+    return rows
+
+
+def work_per_step(rows: list[dict], substeps: tuple[int, ...] = (1, 2, 4, 8)) -> None:
+    """Steps, refused steps, sweeps (dependent vectorised kick-drift pairs, n_k a
+    step) and leapfrog substeps (Σ n_j a step) of the GBS rows, the time per step
+    and per substep, and the time against heyoka and IAS15 (`--extrapolation`)."""
+    peers = {row["method"]: row["run_s"] for row in rows}
+    heyoka, ias15 = peers.get("heyoka tol=1e-16"), peers.get("REBOUND IAS15")
+    for row in rows:
+        if "GBS" not in row["method"]:
+            continue
+        steps = row["steps"]
+        row.update(sweeps=steps * max(substeps), substeps=steps * sum(substeps))
+        versus = "".join(
+            f"  {row['run_s'] / peer:.2f}x {name}"
+            for name, peer in (("heyoka", heyoka), ("IAS15", ias15))
+            if peer
+        )
+        print(f"{row['method']:38s} {steps} steps ({row['rejected']} refused), "
+              f"{row['sweeps']} sweeps, {row['substeps']} substeps: "
+              f"{row['run_s'] / steps * 1e6:.2f} us a step, "
+              f"{row['run_s'] / row['substeps'] * 1e9:.0f} ns a substep{versus}")  # fmt: skip
+
+
 def per_step(scene, rows: list[dict]) -> None:
     """The time per step of `TimeTransformed(Yoshida4)` at ds = 0.005 against its
     hand-written twin (the same steps to t = 70, no saves)."""
@@ -302,6 +359,11 @@ def per_step(scene, rows: list[dict]) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true")
+    parser.add_argument(
+        "--extrapolation",
+        action="store_true",
+        help="GBS rows only (tolerances, jit, the hand-written twin) and the peers",
+    )
     parser.add_argument("--json", help="write the rows here")
     options = parser.parse_args()
     os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})  # taskset -c 1 holds
@@ -311,14 +373,24 @@ def main() -> None:
     ts = np.arange(0.0, (COMPARE_AT if options.quick else 70) + 1)
     reference = None
     rows = []
-    for name, run in runs(scene, ts, options.quick).items():
+    chosen = (
+        extrapolation_runs(scene, ts)
+        if options.extrapolation
+        else runs(scene, ts, options.quick)
+    )
+    for name, run in chosen.items():
         if run is None:
             continue
-        q, p, first, warm = timed(run, 1 if options.quick else 3)
+        q, p, first, warm = timed(run, 1 if options.quick else 5)
         if name == "REBOUND IAS15":
             reference = q[COMPARE_AT]
         row = dict(method=name, t1=float(ts[-1]), first_s=first, run_s=warm,
-                   steps=getattr(run, "steps", None))  # fmt: skip
+                   steps=getattr(run, "steps", None),
+                   rejected=getattr(run, "rejected", None))  # fmt: skip
+        if q.shape[0] != len(ts):  # a twin: its final state only
+            print(f"{name:38s} run {warm * 1e3:8.1f} ms (first {first:5.1f} s)")
+            rows.append(row)
+            continue
         row.update(measures(scene, q, p), state_at_30=q[COMPARE_AT].tolist())
         rows.append(row)
         print(f"{name:38s} run {warm * 1e3:8.1f} ms (first {first:5.1f} s)  "
@@ -328,12 +400,14 @@ def main() -> None:
               f"receding {row['receding']}", flush=True)  # fmt: skip
     if reference is not None:
         print(f"position at t = {COMPARE_AT} against REBOUND IAS15:")
-        for row in rows:
+        for row in (row for row in rows if "state_at_30" in row):
             row["ias15_difference_at_30"] = float(
                 np.max(np.abs(np.asarray(row["state_at_30"]) - reference))
             )
             print(f"  {row['method']:38s} {row['ias15_difference_at_30']:.1e}")
-    if not options.quick:
+    if options.extrapolation:
+        work_per_step(rows)
+    elif not options.quick:
         per_step(scene, rows)
     if options.json:
         meta = dict(mode="quick" if options.quick else "full")
