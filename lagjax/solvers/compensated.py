@@ -27,8 +27,10 @@ def compensated_add(y: Any, increment: Any, compensation: Any) -> tuple[Any, Any
         total = y_leaf + corrected
         return total, corrected - (total - y_leaf)
 
-    pairs = jax.tree_util.tree_map(add, y, increment, compensation)
     outer = jax.tree_util.tree_structure(y)
+    if outer.num_leaves == 0:  # nothing to add (e.g. parameters with no arrays)
+        return y, compensation
+    pairs = jax.tree_util.tree_map(add, y, increment, compensation)
     inner = jax.tree_util.tree_structure((0, 0))
     total, new_compensation = jax.tree_util.tree_transpose(outer, inner, pairs)
     return total, new_compensation
