@@ -52,14 +52,15 @@ def step_size(coeffs: jax.Array, rtol: Any, atol: Any) -> jax.Array:
     tolerance = jnp.minimum(rtol, atol)
     # max(atol, rtol‖y₀‖)/tol: 1 in absolute mode, the state's size in relative mode.
     scale = jnp.maximum(atol, rtol * jnp.max(jnp.abs(coeffs[0]), axis=0)) / tolerance
-    radii = []
-    for j in (order - 1, order):
-        norm = jnp.max(jnp.abs(coeffs[j]), axis=0)
-        # A zero coefficient bounds nothing: it allows any step (a polynomial solution).
-        safe = jnp.where(norm > 0, norm, 1.0)
-        radii.append(jnp.where(norm > 0, (scale / safe) ** (1.0 / j), jnp.inf))
+    # The last two orders' norms in one reduction (one kernel, not two).
+    norms = jnp.max(jnp.abs(coeffs[order - 1 :]), axis=1)
+    powers = jnp.asarray([1.0 / (order - 1), 1.0 / order], coeffs.dtype)
+    powers = powers.reshape((2,) + (1,) * (norms.ndim - 1))
+    # A zero coefficient bounds nothing: it allows any step (a polynomial solution).
+    safe = jnp.where(norms > 0, norms, 1.0)
+    radii = jnp.where(norms > 0, (scale / safe) ** powers, jnp.inf)
     factor = tolerance ** (1.0 / (order - 1)) * math.exp(-SAFETY_EXPONENT / (order - 1))
-    return factor * jnp.minimum(*radii)
+    return factor * jnp.min(radii, axis=0)
 
 
 def horner(coeffs: jax.Array, tau: jax.Array) -> jax.Array:
