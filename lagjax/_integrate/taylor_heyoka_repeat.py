@@ -4,12 +4,16 @@ structure runs only the checks that read values.
 
 A first call goes the whole way (`taylor_run.run_taylor`): every input check of
 `simulate`, the system resolved, its vector field translated into heyoka's
-expressions, the integrator compiled. Measured on one core (double pendulum to
-t = 0.01, heyoka's own run 11 µs), that way spends 2–3 ms in Python around the
-run: each access to a method of an equinox Module builds a bound-method Module
-whose checks flatten the whole system (~80 µs, a dozen accesses), the
+expressions, the integrator compiled. Each later call that way spent 4–8 ms in
+Python around heyoka's run (double pendulum to t = 0.01, one core of a loaded
+2-core machine, heyoka's own call 0.08 ms; a run to t = 100 takes 2–4 ms on a
+quiet one): each access to a method of an equinox Module builds a bound-method
+Module whose checks flatten the whole system (~80 µs, a dozen accesses), the
 translation cache hashes the system, the batch machinery handles one member as
-a block of lanes, and `Trajectory.__init__` flattens the system again.
+a block of lanes, and `Trajectory.__init__` flattens the system again. A
+repeat spends 0.5 ms there (0.16–0.2 ms on a quieter machine): 1.04× heyoka's
+time to t = 100 at tol 1e-12 and 0.99× at 1e-15, where the first-call path
+gave 1.60× and 1.31× (`benchmarks/heyoka_peer.py`).
 
 What a first call decides depends on the call's *structure*, which keys a kept
 `_Repeat` (least recently used dropped): the system — by identity, as the
