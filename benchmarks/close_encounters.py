@@ -18,7 +18,8 @@ the inherited affinity: `taskset -c 1` holds):
 - `--extrapolation`: only GBS (1, 2, 4, 8) at tol 1e-12, 1e-13 and 1e-14, at 1e-13
   also inside `jax.jit` and as its hand-written twin (`benchmarks.extrapolation_twin`:
   the same steps, no saves), the peers, and per GBS row its steps, refused steps,
-  sweeps, leapfrog substeps and time per step and per substep.
+  sweeps, leapfrog substeps and time per step and per substep; the rows are timed
+  in seven interleaved rounds (the fastest of each).
 
 Columns: warm run time (median of five, one with `--quick`; compilation apart), steps, the largest
 relative energy error over the saves and at t = 70, the largest |total momentum|
@@ -29,29 +30,28 @@ escapes) and whether its distance from the binary grows over the last ten time
 units. `--quick` runs to t = 30 only (before the escape), one ds per table and
 one extrapolation row, no JAX-route Taylor row.
 
-`--extrapolation`, 2026-11-27, core 1 pinned, load ≈ 3.6 (another job on the
-same core: every time inflated about threefold, heyoka's 46 ms against its quiet
-14–19 ms; read the ratios, all from one run):
+`--extrapolation`, 2026-11-27, core 1 pinned, load ≈ 3.4 on the machine (heyoka at
+14 ms, near its quiet 14–19 ms), seven interleaved rounds, the fastest of each:
 
 | GBS 1,2,4,8 | time | / heyoka | / IAS15 | steps (refused) | energy max | Δq(t=30) |
 |---|---|---|---|---|---|---|
-| tol 1e-12 | 47.3 ms | 1.02 | 0.33 | 2,485 (191) | 1.3e-11 | 3.7e-9 |
-| tol 1e-13 | 59.9 ms | 1.29 | 0.42 | 3,393 (209) | 8.3e-13 | 3.7e-9 |
-| tol 1e-14 | 60.3 ms | 1.30 | 0.42 | 4,599 (183) | 1.9e-13 | 3.7e-9 |
-| tol 1e-13 inside `jax.jit` | 31.8 ms | 0.69 | 0.22 | 3,393 (209) | 3.1e-12 | 3.7e-9 |
-| its hand-written twin | 19.9 ms | 0.43 | 0.14 | 3,393 (209) | | |
-| REBOUND IAS15 | 142.5 ms | 3.1 | 1 | | 9.9e-11 | 0 |
-| heyoka tol 1e-16 | 46.3 ms | 1 | | | 1.4e-9 | 5.5e-8 |
+| tol 1e-12 | 13.7 ms | 0.97 | 0.31 | 2,485 (191) | 1.3e-11 | 3.7e-9 |
+| tol 1e-13 | 15.4 ms | 1.09 | 0.35 | 3,393 (209) | 8.3e-13 | 3.7e-9 |
+| tol 1e-14 | 18.4 ms | 1.29 | 0.41 | 4,599 (183) | 1.9e-13 | 3.7e-9 |
+| tol 1e-13 inside `jax.jit` | 8.6 ms | 0.61 | 0.19 | 3,393 (209) | 3.1e-12 | 3.7e-9 |
+| its hand-written twin | 4.8 ms | 0.33 | 0.11 | 3,393 (209) | | |
+| REBOUND IAS15 | 44.6 ms | 3.1 | 1 | | 9.9e-11 | 0 |
+| heyoka tol 1e-16 | 14.2 ms | 1 | | | 1.4e-9 | 5.5e-8 |
 
 Per step of 8 sweeps (15 leapfrog substeps over the 4 lanes): the compiled loop
-9.4 µs (625 ns a substep), the twin 5.9 µs (391 ns): 1.6×, from 4–5× before the
-kick and drift were taken on scalars (`lagjax._linalg.scalar_value_and_gradient`)
-and the sweeps rolled into one loop. An eager `simulate` call adds its checks (a
-few ms on a quiet core, about 28 ms here). The energy error is set by the
-tolerance above 2e-13 (about 13× tol) and by round-off below: over tol 1e-13 …
-1e-14 it falls anywhere in 2e-13–3e-12 with the rounding of the compiled program
-(the same 3,393 steps give 8.3e-13 eagerly and 3.1e-12 under `jax.jit`), so the
-1e-12 target is met on average, not robustly.
+2.55 µs (170 ns a substep), the twin 1.40 µs (93 ns): 1.8×, from about 4.5× before
+the kick and drift were taken on scalars (`lagjax._linalg.scalar_value_and_gradient`)
+and the sweeps rolled into one loop; the eager `simulate` call adds its checks,
+about 7 ms (the same run before: 30 ms eager against heyoka's 19, 1.6×). The
+energy error is set by the tolerance above 2e-13 (about 13× tol) and by round-off
+below: over tol 1e-13 … 1e-14 it falls anywhere in 2e-13–3e-12 with the rounding
+of the compiled program (the same 3,393 steps give 8.3e-13 eagerly and 3.1e-12
+under `jax.jit`), so the 1e-12 target is met on average, not robustly.
 
 Earlier (the full mode, load ≈ 10, before the scalar kick): the fixed-step tables
 need 10⁵ steps for the same energy — `TimeTransformed(Yoshida4)` at ds = 0.005,
@@ -76,6 +76,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import time
 from collections.abc import Callable
 
 import diffrax
@@ -94,6 +95,7 @@ from lagjax.solvers.splitting_tables import YOSHIDA4_WEIGHTS
 COMPARE_AT = 30
 # rtol = atol of the `--extrapolation` rows (GBS 1, 2, 4, 8).
 TOLERANCE_SWEEP = (1e-12, 1e-13, 1e-14)
+ROUNDS = 7  # interleaved rounds of the `--extrapolation` rows
 # (substeps n_1..n_k, rtol = atol) of the Gragg–Bulirsch–Stoer rows in the full run.
 EXTRAPOLATION_ROWS = (
     ((1, 2, 4, 8), 1e-13),
@@ -314,6 +316,23 @@ def extrapolation_runs(scene, ts: np.ndarray) -> dict[str, Callable | None]:
     return rows
 
 
+def interleaved(chosen: dict[str, Callable], rounds: int) -> dict[str, tuple]:
+    """(first call s, fastest of `rounds` later calls s) per row, the rows run in
+    turn in every round."""
+    first = {}
+    for name, run in chosen.items():
+        start = time.perf_counter()
+        run()
+        first[name] = time.perf_counter() - start
+    best = dict.fromkeys(chosen, np.inf)
+    for _ in range(rounds):
+        for name, run in chosen.items():
+            start = time.perf_counter()
+            run()
+            best[name] = min(best[name], time.perf_counter() - start)
+    return {name: (first[name], best[name]) for name in chosen}
+
+
 def work_per_step(rows: list[dict], substeps: tuple[int, ...] = (1, 2, 4, 8)) -> None:
     """Steps, refused steps, sweeps (dependent vectorised kick-drift pairs, n_k a
     step) and leapfrog substeps (Σ n_j a step) of the GBS rows, the time per step
@@ -373,15 +392,23 @@ def main() -> None:
     ts = np.arange(0.0, (COMPARE_AT if options.quick else 70) + 1)
     reference = None
     rows = []
-    chosen = (
-        extrapolation_runs(scene, ts)
-        if options.extrapolation
-        else runs(scene, ts, options.quick)
-    )
+    chosen = {
+        name: run
+        for name, run in (
+            extrapolation_runs(scene, ts)
+            if options.extrapolation
+            else runs(scene, ts, options.quick)
+        ).items()
+        if run is not None
+    }
+    # --extrapolation: rounds of every row in turn, so a load that changes during
+    # the run reaches every row alike (the ratios are what it reports).
+    warm_times = interleaved(chosen, ROUNDS) if options.extrapolation else {}
     for name, run in chosen.items():
-        if run is None:
-            continue
-        q, p, first, warm = timed(run, 1 if options.quick else 5)
+        if name in warm_times:
+            (q, p), (first, warm) = run(), warm_times[name]
+        else:
+            q, p, first, warm = timed(run, 1 if options.quick else 5)
         if name == "REBOUND IAS15":
             reference = q[COMPARE_AT]
         row = dict(method=name, t1=float(ts[-1]), first_s=first, run_s=warm,
