@@ -126,6 +126,7 @@ def _pendulum():
     return lj.SeparableHamiltonian(lambda p: 0.5 * p**2, lambda q: -jnp.cos(q))
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_the_lattice_run_is_the_splitting_up_to_rounding_and_keeps_its_order():
     pendulum, y0 = _pendulum(), (jnp.asarray(1.2), jnp.asarray(0.0))
     reference = lj.simulate(pendulum, y0, t1=4.0, dt=1e-3, solver=lj.Yoshida6())
@@ -140,6 +141,7 @@ def test_the_lattice_run_is_the_splitting_up_to_rounding_and_keeps_its_order():
     assert 3.6 < order < 4.4, order
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_vmap_over_initial_states():
     q0s = jnp.array([[1.0, 0.0], [0.8, 0.1], [1.2, -0.1]])
 

@@ -280,6 +280,7 @@ def test_runs_it_cannot_walk_back_are_refused():
         lj.ReversibleAdjoint(checkpoints=0)
 
 
+@pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 @pytest.mark.parametrize(
     "solver", [lj.StormerVerlet(), lj.BitReversible(lj.StormerVerlet())]
 )
