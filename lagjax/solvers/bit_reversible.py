@@ -387,13 +387,13 @@ class BitReversible(
         lattice, units, force, nominal = solver_state
         if made_jump is not False:
             # After a jump y0 and the vector field may have changed: back on the lattice.
+
+            def back_on_the_lattice():
+                moved = lattice.encode(y0)
+                return moved, self._force_at(terms, t0, y0, lattice, moved, args)
+
             units, force = jax.lax.cond(
-                made_jump,
-                lambda: (
-                    lattice.encode(y0),
-                    self._force_at(terms, t0, y0, lattice, lattice.encode(y0), args),
-                ),
-                lambda: (units, force),
+                made_jump, back_on_the_lattice, lambda: (units, force)
             )
         params, static = eqx.partition((terms, args), eqx.is_inexact_array)
         y1, force, units, overflow = _straight_through_step(
