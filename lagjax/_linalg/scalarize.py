@@ -31,6 +31,7 @@ import numpy as np
 from jax import lax
 
 from lagjax._linalg.jaxpr_interpreter import CALLS, evaluate_jaxpr
+from lagjax._linalg.scalarized_branches import scalar_cond
 
 MAX_SCALARIZED_SIZE = 64
 
@@ -137,11 +138,16 @@ class _Unsupported(Exception):
     """Raised while checking a jaxpr that this module cannot scalarize."""
 
 
-def _check(jaxpr: Any) -> None:
+def _check(jaxpr: Any, branches: bool = False) -> None:
     for eqn in jaxpr.eqns:
         name = eqn.primitive.name
         if name in CALLS:
-            _check(eqn.params["jaxpr"].jaxpr)
+            _check(eqn.params["jaxpr"].jaxpr, branches)
+        elif name == "cond" and branches:
+            pass  # each branch is judged on its own (`scalarized_branches`)
+        elif name == "custom_vmap_call" and branches:
+            # `any_in_batch`, the predicate of a branch: its unbatched meaning
+            _check(eqn.params["call"].jaxpr, branches)
         elif name not in _ELEMENTWISE | _STRUCTURAL | _CONSTANTS:
             raise _Unsupported(name)
         for var in (*eqn.invars, *eqn.outvars):
@@ -312,9 +318,21 @@ def _structural(eqn: Any, operands: list[np.ndarray]) -> Any:
     return _reduce(operands[0], params["axes"], combine)
 
 
+def _scalarizable(jaxpr: Any) -> bool:
+    try:
+        _check(jaxpr, branches=True)
+    except _Unsupported:
+        return False
+    return True
+
+
 def _scalar_rule(eqn: Any, operands: list[np.ndarray]) -> list[np.ndarray]:
     """One equation on object arrays of scalars (`evaluate_jaxpr`'s rule)."""
     name = eqn.primitive.name
+    if name == "cond":  # only where the caller asked for branches (`_check`)
+        return scalar_cond(eqn, operands, _scalarizable, _evaluate)
+    if name == "custom_vmap_call":  # likewise
+        return _evaluate(eqn.params["call"].jaxpr, eqn.params["call"].consts, operands)
     if name in _ELEMENTWISE:
         results = [_elementwise(eqn, operands)]
     elif name in _CONSTANTS:
@@ -338,14 +356,18 @@ def _evaluate(jaxpr: Any, consts: Sequence[Any], inputs: Sequence[np.ndarray]) -
     )
 
 
-def scalarize(fn: Callable[..., jax.Array], *example: Any) -> Callable | None:
+def scalarize(
+    fn: Callable[..., jax.Array], *example: Any, branches: bool = False
+) -> Callable | None:
     """A scalar-argument twin of `fn(*arrays) -> scalar`, or None if not possible.
 
     `example` are arrays (or tracers) with the shapes and dtypes `fn` will be called
     with. The twin takes, for each argument, an object array of that shape holding
     JAX scalars, and returns the scalar result built from scalar operations only.
+    With `branches`, a `lax.cond` is kept as a `lax.switch` on scalars
+    (`scalarized_branches`); without, it makes `scalarize` return None.
     """
-    twin = scalarize_outputs(fn, *example)
+    twin = scalarize_outputs(fn, *example, branches=branches)
     if twin is None:
         return None
 
@@ -356,13 +378,15 @@ def scalarize(fn: Callable[..., jax.Array], *example: Any) -> Callable | None:
     return scalar_fn
 
 
-def scalarize_outputs(fn: Callable[..., Any], *example: Any) -> Callable | None:
+def scalarize_outputs(
+    fn: Callable[..., Any], *example: Any, branches: bool = False
+) -> Callable | None:
     """As `scalarize`, for a `fn` of several outputs (a value and its gradient):
     the twin returns the list of `fn`'s flattened outputs, each an object array
     of JAX scalars."""
     closed = jax.make_jaxpr(fn)(*example)
     try:
-        _check(closed.jaxpr)
+        _check(closed.jaxpr, branches)
     except _Unsupported:
         return None
 

@@ -64,7 +64,7 @@ def lower_vector_field(
             "lagjax.Taylor: vector_field(t, y, args) must return one array shaped "
             f"like y {jnp.shape(y0)}, got {closed.out_avals}"
         )
-    twin = scalarize(flat, t0, y0, *leaves) if scalar else None
+    twin = scalarize(flat, t0, y0, *leaves, branches=True) if scalar else None
     if twin is None:
         return lower(closed), leaves
     n, shapes = y0.shape[0], [jnp.shape(leaf) for leaf in leaves]

@@ -305,6 +305,8 @@ def _walk(
             inner, consts = _inner(eqn)
             const_ids = [builder.constant(c) for c in consts]
             outs = _walk(builder, inner, const_ids, ins)
+        elif eqn.primitive.name == "cond" and any(builder.flags(ins[1:])):
+            outs = _lower_cond(builder, eqn, ins)
         elif any(builder.flags(ins)) and any(_is_float(v.aval) for v in eqn.outvars):
             outs = _series_rule(builder, eqn, ins)
         else:
@@ -314,6 +316,50 @@ def _walk(
             outs = builder.emit(rule, ins, [v.aval for v in eqn.outvars], False)
         env.update(zip(eqn.outvars, outs))
     return [read(v) for v in jaxpr.outvars]
+
+
+def _lower_cond(builder: _Builder, eqn: Any, ins: list[int]) -> list[int]:
+    """`lax.cond`/`lax.switch` on series operands: every branch in place, each
+    output the branch that the order-0 index selects (`select_n`, like `Branch`:
+    the step keeps the side where it starts). A branch with a primitive that has
+    no Taylor rule (a pivoted LU fallback written as loops) is lowered to NaN:
+    a step that starts in it fails as non-finite instead of returning a number."""
+    index, operands = ins[0], ins[1:]
+    branches, first_error = [], None
+    for branch in eqn.params["branches"]:
+        const_ids = [builder.constant(c) for c in branch.consts]
+        try:
+            branches.append(_walk(builder, branch.jaxpr, const_ids, operands))
+        except NotImplementedError as error:
+            first_error = first_error or error
+            branches.append(None)
+    if all(outs is None for outs in branches):
+        assert first_error is not None
+        raise first_error
+    outs = []
+    for position, var in enumerate(eqn.outvars):
+        aval = var.aval
+        poison = jnp.full(aval.shape, jnp.nan if _is_float(aval) else 0, aval.dtype)
+        cases = [
+            builder.constant(poison) if taken is None else taken[position]
+            for taken in branches
+        ]
+        rule = rec.Affine(
+            primitive=jax.lax.select_n_p,
+            params={},
+            series=builder.flags((index, *cases)),
+        )
+        series = _is_float(aval) and any(builder.flags(cases))
+        (out,) = builder.emit(
+            rule
+            if series
+            else rec.Fixed(primitive=jax.lax.select_n_p, params={}, series=rule.series),
+            (index, *cases),
+            [aval],
+            series,
+        )
+        outs.append(out)
+    return outs
 
 
 def _needed(ops: list[Op], outputs: tuple[int, ...]) -> tuple[Op, ...]:
