@@ -95,7 +95,7 @@ def simulate(
     t0: float = 0.0,
     t1: float | None = None,
     dt: float | None = None,
-    solver: diffrax.AbstractSolver | None = None,
+    solver: diffrax.AbstractSolver | Taylor | None = None,
     ts: Any = None,
     args: Any = None,
     rtol: float | None = None,
