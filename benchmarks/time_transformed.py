@@ -2,8 +2,9 @@ r"""Time-transformed splitting on eccentric Kepler orbits, against Dopri8 and he
 
 Kepler's problem (GM = a = 1, period 2π) from pericentre, e = 0.99, 0.999 and
 0.9999, over 1000 periods (100 with `--quick`), 101 saved states at multiples of 10
-periods (at the pericentre, where the energy is hardest to evaluate). Rows, one
-pinned core:
+periods (at the pericentre, where the energy reads the run's round-off most
+enlarged: below). Rows, one pinned core (the first of the inherited affinity:
+`taskset -c 1` holds):
 
 - `lj.TimeTransformed(lj.Yoshida4())` and `(lj.KahanLi8())`, the logarithmic
   Hamiltonian, fictitious step ds = 0.05 (dt/ds = r: 126 steps per period at any e);
@@ -19,6 +20,9 @@ Columns: warm run time (median of five, three with `--quick`; compilation apart)
 the largest relative energy error over the saves, the pericentre (Runge–Lenz) drift in rad, and the
 position error against Kepler's equation (the timing).
 
+`--round-off`: where the energy error comes from (`round_off_rows`), on 32 orbits
+with e in [0.99, 0.99001] and at pericentre and apocentre saves of e = 0.99.
+
 Measured (full mode, 2026-11-27, core 0 pinned, load ≈ 3.6: times inflated about
 twofold, read the ratios; heyoka's own row is its energy at tol 1e-16):
 
@@ -28,15 +32,48 @@ twofold, read the ratios; heyoka's own row is its energy at tol 1e-16):
 | 0.999 | 74 ms (0.16×), 9.2e-12, 4.1e-13 rad | 315 ms (0.69×), 8.0e-11, 3.3e-13 rad | 456 ms, 6.3e-11, 3.3e-14 rad |
 | 0.9999 | 88 ms (0.16×), 1.2e-11, 4.6e-13 rad | 345 ms (0.61×), 1.3e-9, 3.7e-13 rad | 565 ms, 2.8e-10, 2.4e-14 rad |
 
-(time and its ratio to heyoka, relative energy error, pericentre drift.) Every
+(time and its ratio to heyoka, relative energy error, pericentre drift.) Again
+2026-11-27, core 0, load ≈ 5 (times inflated threefold), Yoshida4 and heyoka
+alone: 0.25×, 0.21×, 0.15× heyoka's time, the same energies and drifts. Every
 time-transformed row is faster than heyoka and keeps the drift below 1e-10 rad;
-none keeps the energy to 1e-12 — nor does heyoka past e = 0.99. The energy error
-is round-off: the logarithmic leapfrog keeps Kepler's energy exactly in exact
-arithmetic, and the 126,000 steps each round increments of the size of the
-pericentre's kinetic energy, (1 + e)/(1 − e)/2 times |E|. Dopri8 at 1e-12: 1.7–2.5×
-heyoka's time, energy 8e-10–1e-7, drift 3e-10 rad. (e = 0.9999 was refused before
-this run: the step-count guard judged ds = 0.05 at the pericentre's pace, 1.3e9
-steps; it now takes the faster of that and the orbit's mean pace, 1.3e5.)
+none keeps the energy to 1e-12 at these saves — nor does heyoka past e = 0.99.
+Dopri8 at 1e-12: 1.7–2.5× heyoka's time, energy 8e-10–1e-7, drift 3e-10 rad.
+
+**Where the energy error comes from** (`--round-off`, 2026-11-27, core 0, load ≈
+3.6; ε = 2.2e-16). The saves fall on the pericentre, and there the energy reads
+the round-off enlarged:
+
+- not the energy's evaluation: the same states evaluated in long double give the
+  same error (2.76e-12 at the pericentre saves of e = 0.99, both ways);
+- not the saves: the states of all 125,660 steps, without partial steps, reach the
+  same 5e-12 near the pericentre (one orbit, ds = 0.05);
+- the round-off of the run, read through the quantity the method keeps. The
+  logarithmic leapfrog keeps $\Gamma = \ln((T + p_t)\,r)$ exactly in exact
+  arithmetic (a long-double run of the same map keeps the energy to 1e-16 through
+  a pericentre); round-off walks $\Gamma$, and a state with $\Gamma \ne 0$ lies on
+  the Kepler orbit of $GM = e^\Gamma$ with energy $-p_t$, so
+  $H + p_t = \Gamma/r$: relative $2\Gamma/(1 - e)$ at the pericentre (200× at e =
+  0.99), $\Gamma/2$ at the apocentre. At the apocentre saves the error is 3.3e-14,
+  the rounding of $p_t = -H(q_0, p_0)$ itself.
+
+| Yoshida4, ds = 0.05, 32 orbits | Kahan's sum (the default) | plain sum |
+|---|---|---|
+| rms Γ after 10 / 100 / 1000 periods | 8.7 / 22 / 97 ε | 23 / 49 / 251 ε |
+| mean Γ after 1000 periods (a trend) | 0.6 ε | 12 ε |
+| energy at the pericentre / apocentre saves (e = 0.99) | 2.8e-12 / 3.3e-14 | 4.3e-12 / 3.7e-14 |
+
+Kahan's sum (`compensated=True`, the splitting tables' default, on in every row
+above) removes the part of the ~118 steps a period away from the pericentre. What
+is left is the round-off of the increments themselves in the ~8 steps a period
+near the pericentre, where a step moves the state by as much as its size: no
+summation reaches it (carrying the compensation through the step's Jacobian as
+well, a `jax.jvp` a step, gave 69 ε against 79 on a hand-written twin). It grows
+as √n (a random walk; the ensemble mean stays at 0.6 ε: no secular trend) and
+falls slowly with the step: ds = 0.0125, four times the steps, 39 ε, 1.7e-12 rms
+at the pericentre. So at e = 0.99 the 1e-12 target at pericentre saves is below
+what float64 steps reach in heyoka's time (heyoka reads 1.3e-12 there); at
+e = 0.999 and 0.9999 the state's own rounding at the pericentre (½ ulp of
+|p| ≈ 45 and 141) is already 3e-13 and 4e-12 of the energy.
 
 References: Mikkola & Tanikawa, Celest. Mech. 74, 287 (1999); Preto & Tremaine,
 AJ 118, 2532 (1999); Biscani & Izzo, MNRAS 504, 2614 (2021).
@@ -202,21 +239,75 @@ def batch_row(ts: np.ndarray, periods: int, repeats: int) -> dict:
     return row
 
 
+def log_hamiltonian(q: np.ndarray, p: np.ndarray, p_t: np.ndarray) -> np.ndarray:
+    """Γ = ln((T + p_t)·r) in long double: zero on the start's shell, kept exactly
+    by the logarithmic leapfrog on Kepler's problem; a state with Γ ≠ 0 is on the
+    Kepler orbit of GM = e^Γ with energy −p_t, so H − E = Γ/r to first order."""
+    q, p = q.astype(np.longdouble), p.astype(np.longdouble)
+    kinetic = np.sum(p * p, -1) / 2
+    return np.log((kinetic + p_t) * np.sqrt(np.sum(q * q, -1))).astype(float)
+
+
+def round_off_rows(periods: int) -> list[dict]:
+    """Where the energy error comes from (`--round-off`): 32 orbits with e in
+    [0.99, 0.99001], `TimeTransformed(Yoshida4)` at ds = 0.05 with and without
+    Kahan's sum; the log-Hamiltonian Γ half a period before the end (at the
+    apocentre, in long double), its ensemble mean (a secular trend) and rms after
+    periods/100, /10 and all; and the energy of the first orbit at the pericentre
+    saves (in float64 and in long double) and at the apocentre ones."""
+    eccentricities = np.linspace(0.99, 0.99001, 32)
+    starts = tuple(np.stack(x) for x in zip(*map(pericentre_state, eccentricities)))
+    q0, p0 = starts
+    p_t = -(np.sum(p0**2, -1) / 2 - 1 / np.linalg.norm(q0, axis=-1))  # as the run
+    rows = []
+    for compensated in (True, False):
+        solver = lj.TimeTransformed(lj.Yoshida4(compensated=compensated))
+        row = dict(method=f"Yoshida4 ds=0.05 compensated={compensated}")
+        for fraction in (100, 10, 1):
+            span = (periods // fraction - 0.5) * PERIOD
+            batch = jax.jit(jax.vmap(lambda s, t1=span, solver=solver: lj.simulate(
+                KEPLER, s, t1=t1, dt=0.05, solver=solver).ys))  # fmt: skip
+            q, p = (np.asarray(x)[:, -1] for x in batch(starts))
+            gamma = log_hamiltonian(q, p, p_t)
+            row[f"gamma_rms_{periods // fraction}"] = float(np.sqrt(np.mean(gamma**2)))
+            row[f"gamma_mean_{periods // fraction}"] = float(np.mean(gamma))
+        for place, offset in (("pericentre", 0.0), ("apocentre", 0.5)):
+            ts = (np.linspace(0, periods, 11)[1:] - offset) * PERIOD
+            traj = lj.simulate(KEPLER, pericentre_state(0.99), t1=ts[-1], ts=ts,
+                               dt=0.05, solver=solver)  # fmt: skip
+            q, p = np.asarray(traj.q), np.asarray(traj.p)
+            row[f"energy_{place}"] = conserved_errors(q, p)["energy"]
+            q, p = q.astype(np.longdouble), p.astype(np.longdouble)
+            energy = np.sum(p * p, -1) / 2 - 1 / np.sqrt(np.sum(q * q, -1))
+            row[f"energy_{place}_long_double"] = float(
+                np.max(np.abs(energy / -0.5 - 1))
+            )
+        print(row, flush=True)
+        rows.append(row)
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true")
+    parser.add_argument(
+        "--round-off", action="store_true", help="only the round-off analysis"
+    )
     parser.add_argument("--json", help="write the rows here")
     options = parser.parse_args()
-    os.sched_setaffinity(0, {0})
+    os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})  # taskset -c 1 holds
     lj.enable_fast_cpu_loops()
     jax.config.update("jax_enable_x64", True)
     periods = 100 if options.quick else 1000
     repeats = 3 if options.quick else 5
     ts = np.linspace(0, periods * PERIOD, 101)
-    rows = single_rows(ts, periods, repeats)
-    if options.quick:  # the batch over 10 periods, saved once a period
-        periods, ts = 10, np.linspace(0, 10 * PERIOD, 11)
-    rows.append(batch_row(ts, periods, 1 if options.quick else 3))
+    if options.round_off:
+        rows = round_off_rows(periods)
+    else:
+        rows = single_rows(ts, periods, repeats)
+        if options.quick:  # the batch over 10 periods, saved once a period
+            periods, ts = 10, np.linspace(0, 10 * PERIOD, 11)
+        rows.append(batch_row(ts, periods, 1 if options.quick else 3))
     if options.json:
         meta = dict(mode="quick" if options.quick else "full")
         with open(options.json, "w") as file:
