@@ -18,8 +18,11 @@ interpolation:
 
 Two loops run the same step:
 
-- `max_steps=None`: a `lax.while_loop` until $t$ passes the last save time (the
-  exact number of steps; `jit`, `vmap`, `jax.jvp`/`jacfwd`).
+- `max_steps=None`: for each save time in turn a `lax.while_loop` until $t$ passes
+  it (the exact number of steps; `jit`, `vmap`, `jax.jvp`/`jacfwd`), the recorded
+  states the output of a `lax.scan` over the save times, not a buffer in the
+  loop's state (`_walk_to_saves`: under `vmap` that keeps the per-step work
+  independent of the number of saves).
 - `max_steps=N`: a `lax.scan` of N steps, frozen once the last save time is passed
   (reverse mode: `jax.grad` through the run). Too few steps leave the late saves
   unreached: an error, or with `throw=False` `traj.result` says
@@ -164,33 +167,84 @@ class _Carry(NamedTuple):
     slots: Any
 
 
+class _Walk(NamedTuple):
+    """The `while_loop`'s state between two save times: the extended state, the
+    solver's, the fictitious step, the step and rejection counts, and the start
+    of the last step taken with its fictitious step."""
+
+    y: Any
+    solver_state: Any
+    ds: jax.Array
+    steps: jax.Array
+    rejected: jax.Array
+    start: Any
+
+
 def _time(y: Any) -> jax.Array:
     """t of the extended state ((p, p_t), (q, t))."""
     return y[1][1]
 
 
-@eqx.filter_jit
-def _compiled_run(system, y0, args, solver, t0, ds, save_ts, max_steps):
-    """The loop, the partial steps to the save times, and the `Trajectory`."""
-    terms = solver.terms(system)
-    splitting = solver.splitting
-    state0 = extended_state(system, y0, t0, args)
-    saves = save_ts.shape[0]
-    zero = jnp.zeros((), ds.dtype)
+def _stepper(terms: Any, splitting: Any, args: Any):
+    """`advance(y, solver_state, ds) -> (y1, solver_state1, next ds, accepted)`: a
+    splitting step (always taken, ds fixed) or an extrapolation step, which a
+    refused step leaves where it was and retries shorter."""
 
-    def step(carry: _Carry) -> _Carry:
-        y1, error, _, solver_state, _ = splitting.step(
-            terms, zero, carry.ds, carry.y, args, carry.solver_state, False
+    def advance(y, solver_state, ds):
+        zero = jnp.zeros((), ds.dtype)
+        y1, error, _, solver_state1, _ = splitting.step(
+            terms, zero, ds, y, args, solver_state, False
         )
-        if error is None:  # a splitting method: every step is taken, ds fixed
-            accepted, ds_next = True, carry.ds
-        else:  # the extrapolation: a refused step leaves y where it was
-            accepted, ds_next = splitting.adapt(carry.ds, carry.y, y1, error)
-            y1, solver_state = jax.tree_util.tree_map(
-                lambda new, old: jnp.where(accepted, new, old),
-                (y1, solver_state),
-                (carry.y, carry.solver_state),
-            )
+        if error is None:
+            return y1, solver_state1, ds, True
+        accepted, ds_next = splitting.adapt(ds, y, y1, error)
+        y1, solver_state1 = jax.tree_util.tree_map(
+            lambda new, old: jnp.where(accepted, new, old),
+            (y1, solver_state1),
+            (y, solver_state),
+        )
+        return y1, solver_state1, ds_next, accepted
+
+    return advance
+
+
+def _walk_to_saves(advance, y0, solver_state0, ds, save_ts):
+    """`max_steps=None`: for each save time in turn, a `while_loop` of steps until
+    t reaches it; the start of the step that carried t across it (and its ds) is
+    the scan's output for that save (kept from the save before when no step was
+    needed). The loops' states are small, so a `jax.vmap` of the run, which turns
+    each loop into a select over its whole state at every step, selects no buffer
+    of saves (with one slot per save in the loop, 1024 Kepler orbits with 101
+    saves ran 9.6 s instead of 0.13 s with 2)."""
+
+    def one_step(walk: _Walk) -> _Walk:
+        y1, solver_state, ds_next, accepted = advance(
+            walk.y, walk.solver_state, walk.ds
+        )
+        refused = 1 - jnp.asarray(accepted, jnp.int32)
+        return _Walk(y1, solver_state, ds_next, walk.steps + 1,
+                     walk.rejected + refused, (walk.y, walk.ds))  # fmt: skip
+
+    def to_save(walk: _Walk, tau: jax.Array) -> tuple[_Walk, Any]:
+        walk = lax.while_loop(lambda w: _time(w.y) < tau, one_step, walk)
+        return walk, walk.start
+
+    counts = jnp.zeros((), jnp.int32)
+    start = _Walk(y0, solver_state0, ds, counts, counts, (y0, ds))
+    end, (starts, steps) = lax.scan(to_save, start, save_ts)
+    return starts, steps, end.steps, end.rejected, _time(end.y) >= save_ts[-1]
+
+
+def _fixed_steps_to_saves(advance, y0, solver_state0, ds, save_ts, t0, max_steps):
+    """`max_steps=N`: a `lax.scan` of N steps (reverse mode runs through it),
+    frozen once the last save time is passed; each save time's slot records the
+    start of the step that carries t across it."""
+    saves = save_ts.shape[0]
+
+    def step(carry: _Carry, _: Any) -> tuple[_Carry, None]:
+        y1, solver_state, ds_next, accepted = advance(
+            carry.y, carry.solver_state, carry.ds
+        )
         # compare_all: one fused comparison; the default method is a while loop
         # of log2(saves) trips inside every step.
         passed = jnp.searchsorted(
@@ -203,51 +257,53 @@ def _compiled_run(system, y0, args, solver, t0, ds, save_ts, max_steps):
         slots = jax.tree_util.tree_map(
             lambda buffer, x: buffer.at[slot].set(x), carry.slots, (carry.y, carry.ds)
         )
-        return _Carry(
-            y1, solver_state, ds_next, carry.steps + 1,
-            carry.rejected + (1 - jnp.asarray(accepted, jnp.int32)), passed, slots,
-        )  # fmt: skip
+        moved = (y1, solver_state, ds_next, carry.steps + 1,
+                 carry.rejected + (1 - jnp.asarray(accepted, jnp.int32)), passed)  # fmt: skip
+        # Past the last save time the state stays put; the slots need no freezing
+        # (a frozen step writes only to the spare slot).
+        done = carry.next_save >= saves
+        kept = jax.tree_util.tree_map(
+            lambda a, b: jnp.where(done, a, b), carry[:6], moved
+        )
+        return _Carry(*kept, slots), None  # pyright: ignore[reportCallIssue]
 
     slots0 = jax.tree_util.tree_map(
-        lambda x: jnp.full((saves + 2, *jnp.shape(x)), jnp.nan, x.dtype), (state0, ds)
+        lambda x: jnp.full((saves + 2, *jnp.shape(x)), jnp.nan, x.dtype), (y0, ds)
     )
-    carry = _Carry(
-        state0,
-        splitting.init(terms, zero, ds, state0, args),
-        ds,
-        jnp.zeros((), jnp.int32),
-        jnp.zeros((), jnp.int32),
-        jnp.searchsorted(save_ts, t0, side="left").astype(jnp.int32),
-        slots0,
-    )
-    if max_steps is None:
-        carry = lax.while_loop(lambda c: c.next_save < saves, step, carry)
-    else:
-
-        def frozen_step(carry: _Carry, _: Any) -> tuple[_Carry, None]:
-            # Past the last save time the state stays put; the slots need no
-            # freezing (a frozen step writes only to the spare slot).
-            moved = step(carry)
-            done = carry.next_save >= saves
-            kept = jax.tree_util.tree_map(
-                lambda a, b: jnp.where(done, a, b), carry[:6], moved[:6]
-            )
-            return _Carry(*kept, moved.slots), None  # pyright: ignore[reportCallIssue]
-
-        carry, _ = lax.scan(frozen_step, carry, None, length=max_steps)
+    counts = jnp.zeros((), jnp.int32)
+    first = jnp.searchsorted(save_ts, t0, side="left").astype(jnp.int32)
+    carry = _Carry(y0, solver_state0, ds, counts, counts, first, slots0)
+    carry, _ = lax.scan(step, carry, None, length=max_steps)
     starts, steps = _fill_forward(carry.slots, saves)
+    return starts, steps, carry.steps, carry.rejected, carry.next_save >= saves
+
+
+@eqx.filter_jit
+def _compiled_run(system, y0, args, solver, t0, ds, save_ts, max_steps):
+    """The loop, the partial steps to the save times, and the `Trajectory`."""
+    terms = solver.terms(system)
+    splitting = solver.splitting
+    state0 = extended_state(system, y0, t0, args)
+    advance = _stepper(terms, splitting, args)
+    solver_state0 = splitting.init(terms, jnp.zeros((), ds.dtype), ds, state0, args)
+    if max_steps is None:
+        run = _walk_to_saves(advance, state0, solver_state0, ds, save_ts)
+    else:
+        run = _fixed_steps_to_saves(
+            advance, state0, solver_state0, ds, save_ts, t0, max_steps
+        )
+    starts, steps, taken, rejected, reached = run
     landed = jax.vmap(
         lambda y, tau, ds: _partial_step(terms, splitting, y, tau, ds, args)
     )(starts, save_ts, steps)
     (p, _), (q, t_landed) = landed
-    reached = carry.next_save >= saves
     result = diffrax.RESULTS.where(
         reached, diffrax.RESULTS.successful, diffrax.RESULTS.max_steps_reached
     )
     stats = dict(
-        num_steps=carry.steps,
-        num_accepted_steps=carry.steps - carry.rejected,
-        num_rejected_steps=carry.rejected,
+        num_steps=taken,
+        num_accepted_steps=taken - rejected,
+        num_rejected_steps=rejected,
         time_residual=jnp.max(jnp.abs(t_landed - save_ts)),
         energy_start=-state0[0][1],
     )
