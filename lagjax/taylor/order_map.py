@@ -146,6 +146,10 @@ def order_map_coefficients(
     state_of = slice(2 * n_terms + n_state, None)
     weighted = np.array(plan.weighted, dtype=bool)
     rows = [jnp.stack([jnp.asarray(values[v], dtype) for v in plan.slots])]
+    # The state's slots are its sources (yₖ = fₖ₋₁/k) and tₖ is 0 above k = 1:
+    # above order 1 neither the state's rows nor the time's column enter the
+    # product (a tenth of its multiply-adds for the double pendulum).
+    computed = matrix[: len(plan.slots) - n_state, : n_sources - 1]
     for k in range(1, order):
         # Σ_{j=1}^{k−1} xⱼ yₖ₋ⱼ, times j/k where weighted: orders below k only.
         sums = sum(
@@ -153,11 +157,15 @@ def order_map_coefficients(
              for j in range(1, k)),
             start=jnp.zeros(n_terms, dtype),
         )  # fmt: skip
-        time = jnp.full((1,), 1.0 if k == 1 else 0.0, dtype)  # tₖ
-        sources = jnp.concatenate([sums, rows[k - 1][rates_of] / k, time])
+        rates = rows[k - 1][rates_of] / k
         # A matrix times a column: XLA keeps it a dot (a vector-matrix product
         # it rewrites as multiply-reduce and fuses with the sums, which are
         # then recomputed for every slot).
-        rows.append((matrix @ sources[:, None])[:, 0])
+        if k == 1:
+            sources = jnp.concatenate([sums, rates, jnp.ones((1,), dtype)])
+            rows.append((matrix @ sources[:, None])[:, 0])
+            continue
+        product = computed @ jnp.concatenate([sums, rates])[:, None]
+        rows.append(jnp.concatenate([product[:, 0], rates]))
     states = [row[state_of] for row in rows]  # orders 0..p−1
     return jnp.stack([*states, rows[-1][rates_of] / order])  # y_p = f_{p−1}/p
