@@ -14,6 +14,7 @@ import pytest
 
 import lagjax as lj
 from lagjax.taylor import RESULTS, taylor_coefficients, taylor_integrate
+from lagjax.taylor.batch import taylor_integrate_batch
 
 # Two linear fields: the solution through y0 has coefficients Aᵏ y0 / k!.
 ROTATION = np.array([[0.0, 1.0], [-1.0, 0.0]])
@@ -113,3 +114,15 @@ def test_four_coordinate_lagrangian_integrates():
     reference = lj.simulate(lag, y0, t1=20.0, ts=ts, solver=diffrax.Dopri8(), rtol=1e-13,
                             atol=1e-13, max_steps=10**6)  # fmt: skip
     np.testing.assert_allclose(run.q, reference.q, atol=1e-9)
+
+
+def test_members_of_a_batch_take_their_own_branch():
+    """y0 on either side of the branch, one `vmap`: each member follows the
+    flow of its own side, exp(A t) y0, while it stays there (t ≤ 0.3)."""
+    starts = jnp.array([[0.4, 0.3], [-0.4, 0.3]])
+    mapped = jax.vmap(lambda y: taylor_integrate(linear_by_sign, y, 0.0, 0.3).ys[-1])
+    native = taylor_integrate_batch(linear_by_sign, starts, 0.0, 0.3).ys[:, -1]
+    for ends in (mapped(starts), native):
+        for start, end, matrix in zip(starts, ends, (ROTATION, DAMPED)):
+            exact = jax.scipy.linalg.expm(0.3 * jnp.asarray(matrix)) @ start
+            np.testing.assert_allclose(end, exact, rtol=1e-13, atol=1e-15)
