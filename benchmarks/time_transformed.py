@@ -39,10 +39,13 @@ time-transformed row is faster than heyoka and keeps the drift below 1e-10 rad;
 none keeps the energy to 1e-12 at these saves — nor does heyoka past e = 0.99.
 Dopri8 at 1e-12: 1.7–2.5× heyoka's time, energy 8e-10–1e-7, drift 3e-10 rad.
 
-The batch, full mode (2026-11-27, core 1, load ≈ 3.5): 1024 orbits over 1000
-periods in 20.2 s, 19.7 ms a member against 63 ms for one trajectory (e = 0.99,
-the same 126 steps a period) in the same process: 0.31×; largest energy error
-8.1e-12, largest pericentre drift 4.6e-13 rad. Before the run kept its saves out
+The full mode again after the change below (2026-11-27 21:24, core 1, load ≈ 2,
+heyoka slow in this run: 360, 241, 381 ms): Yoshida4 24, 66, 48 ms, KahanLi8 99,
+312, 206 ms, Dopri8 648, 500, 638 ms, every energy and drift as in the table.
+The batch: 1024 orbits over 1000 periods in 17.2 s, 16.8 ms a member against
+24.1 ms for one trajectory (e = 0.99, the same 126 steps a period) in the same
+run: 0.70× (0.31× in another process at load ≈ 3.5: 19.7 against 63 ms); largest
+energy error 8.1e-12, largest pericentre drift 4.6e-13 rad. Before the run kept its saves out
 of the loop's state (`lagjax._integrate.time_transformed_run._walk_to_saves`),
 `vmap` selected the 101 save slots at every step: 9.6 s for 10 periods of the
 batch (0.45 s after), and the full mode did not finish in half an hour.
