@@ -45,10 +45,11 @@ heyoka slow in this run: 360, 241, 381 ms): Yoshida4 24, 66, 48 ms, KahanLi8 99,
 The batch: 1024 orbits over 1000 periods in 17.2 s, 16.8 ms a member against
 24.1 ms for one trajectory (e = 0.99, the same 126 steps a period) in the same
 run: 0.70× (0.31× in another process at load ≈ 3.5: 19.7 against 63 ms); largest
-energy error 8.1e-12, largest pericentre drift 4.6e-13 rad. Before the run kept its saves out
-of the loop's state (`lagjax._integrate.time_transformed_run._walk_to_saves`),
-`vmap` selected the 101 save slots at every step: 9.6 s for 10 periods of the
-batch (0.45 s after), and the full mode did not finish in half an hour.
+energy error 8.1e-12, largest pericentre drift 4.6e-13 rad. Before the run kept
+its saves out of the loop's state
+(`lagjax._integrate.time_transformed_run._walk_to_saves`), `vmap` selected the
+101 save slots at every step: 9.6 s for 10 periods of the batch (0.45 s after),
+and the full mode did not finish in half an hour.
 
 **Where the energy error comes from** (`--round-off`, 2026-11-27, core 0, load ≈
 3.6; ε = 2.2e-16). The saves fall on the pericentre, and there the energy reads
@@ -57,7 +58,7 @@ the round-off enlarged:
 - not the energy's evaluation: the same states evaluated in long double give the
   same error (2.76e-12 at the pericentre saves of e = 0.99, both ways);
 - not the saves: the states of all 125,660 steps, without partial steps, reach the
-  same 5e-12 near the pericentre (one orbit, ds = 0.05);
+  same 5e-12 near the pericentre (1000 periods, ds = 0.05);
 - the round-off of the run, read through the quantity the method keeps. The
   logarithmic leapfrog keeps $\Gamma = \ln((T + p_t)\,r)$ exactly in exact
   arithmetic (a long-double run of the same map keeps the energy to 1e-16 through
