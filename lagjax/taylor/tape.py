@@ -15,10 +15,12 @@ So each order is two passes:
    operand of every term, then the rates f (a value may fill several slots), so
    the operands of all terms are two contiguous slabs X and Y and
 
-       S = Σ_{j=1}^{p−2} w_j ⊙ T[j, X] ⊙ T[k − j, Y]
+       S = Σ_{j=1}^{k−1} T[j, X] ⊙ T[k − j, Y],
 
-   with w_j = j (j-weighted terms) or 1, and a zero row read for j ≥ k: one
-   vector multiply-add per j over every term and member at once;
+   one vector multiply-add per j over every term and member at once. A
+   j-weighted term's first slot holds j xⱼ instead of xⱼ (nothing else reads
+   it), so no sum needs weights. Each order k is a branch of its own
+   (`lax.switch` on k) whose slices are static: exact lengths, no dynamic index;
 2. the operations in order, each O(1) from the inner sums, the order-0 values
    and the current order's coefficients of its inputs (below, j-weighted sums
    are marked (j·)):
@@ -36,18 +38,21 @@ So each order is two passes:
 
 then row k of the tape (the slots' k-th coefficients) is written at once. Per
 order the program is a few kernels, whatever the number of operations; with a
-batch on the last axis each is one vector operation over the members. The inner
-sums run over p − 2 terms, zeros for j ≥ k: up to twice the multiplications of
-exact sums in exchange for one static loop. Only what later orders read is on
-the tape, the intermediate values of the second pass are not.
+batch on the last axis each is one vector operation over the members. Only what
+later orders read is on the tape, the intermediate values of the second pass
+are not.
 
-Why this layout (XLA CPU, jax 0.10, double pendulum ×1024 to t = 10 at tol
-1e-12, tiles of 32, one pinned core, interleaved in one run): the earlier tape
-(every series value × 2p rows, the sums one gather-multiply-reduce over the
-window) ran 5.07× heyoka's batch mode, this one 4.06×. Its reductions over the
-order axis compiled to scalar loops, while a product of contiguous slabs is
-vectorized; XLA vectorizes a slab of ≥ 64 elements, but fully unrolls and
-leaves scalar an axis of 32 (a (slots, 32) array would be scalar code).
+Why this form (XLA CPU, jax 0.10; double pendulum ×1024 to t = 10 at tol 1e-12,
+tiles of 32, one pinned core, each change against the previous one interleaved
+in one run, ratios to heyoka's batch mode): the earlier tape (every series value
+× 2p rows, the sums one gather-multiply-reduce over a window of 2p − 1 orders)
+5.07×; slots and a slab product per j over all p − 2 values of j, the second
+operand dynamically indexed, 4.1×; a branch per order with static slices and
+exact lengths, 2.2×; the weights folded into the tape, 1.9×. Reductions over the
+order axis compiled to scalar loops and dynamic slices of a slab to scalar code
+with index arithmetic; a product of static contiguous slabs is vectorized. XLA
+vectorizes such a slab when it is long (≥ 64 elements), but fully unrolls and
+leaves scalar an axis of 32: the slabs are flat, never (slots, 32).
 
 References: Jorba & Zou, Experimental Mathematics 14 (2005), §2 (the
 recurrences); Biscani & Izzo, MNRAS 504 (2021) (heyoka's decomposition into
@@ -127,16 +132,22 @@ def _inner_sums(
     tape: jax.Array, k: Any, layout: _Layout, order: int, width: int
 ) -> jax.Array:
     """Σ_{j=1}^{k−1} xⱼ yₖ₋ⱼ (j-weighted where asked) for every term at once,
-    flat: (terms × width,). One product of contiguous slabs per j (k ≤ order − 1,
-    so j ≤ order − 2); for j ≥ k the second operand is read from the zero row."""
+    flat: (terms × width,). Each k (1 ≤ k ≤ order − 1) is a branch of its own with
+    static slices: k − 1 multiply-adds of contiguous slabs, exact lengths (the
+    first operand of a j-weighted term is stored as j xⱼ)."""
     size = len(layout.weighted) * width
-    total = jnp.zeros((size,), tape.dtype)
-    for j in range(1, order - 1):
-        weights = np.repeat(np.where(layout.weighted, float(j), 1.0), width)
-        row = jnp.where(j < k, k - j, order)
-        below = jax.lax.dynamic_slice(tape, (row, size), (1, size))[0]
-        total = total + weights.astype(tape.dtype) * tape[j, :size] * below
-    return total
+
+    def at(k: int):
+        def sums(tape: jax.Array) -> jax.Array:
+            total = jnp.zeros((size,), tape.dtype)
+            for j in range(1, k):
+                total = total + tape[j, :size] * tape[k - j, size : 2 * size]
+            return total
+
+        return sums
+
+    branches = [at(k) for k in range(1, max(order, 2))]
+    return jax.lax.switch(k - 1, branches, tape)
 
 
 def finish(rule: Any, k: Any, s: list, now: list, zi: list, zo: list) -> tuple:
@@ -222,7 +233,11 @@ def tape_coefficients(
             new = finish(op.rule, kf, [sums[start + i] for i in range(count)],
                           current, zi, zo)  # fmt: skip
             now.update(zip(op.outs, (real(c) for c in new)))
-        row = flat_row([now.get(v, real(0.0)) for v in layout.slots])
+        # A j-weighted term's first slot holds k xₖ: its sums need no weights.
+        weights = [kf if w else None for w in layout.weighted]
+        row = [now.get(v, real(0.0)) for v in layout.slots]
+        row[:terms] = [x if w is None else w * x for x, w in zip(row, weights)]
+        row = flat_row(row)
         return jax.lax.dynamic_update_index_in_dim(tape, row, k, axis=0)
 
     tape = jax.lax.fori_loop(1, max(order, 1), one_order, tape)
