@@ -15,8 +15,11 @@ writes the batch loop directly instead, as heyoka's batch mode does:
   tile reached t1; a finished member takes zero steps (τᵦ = 0) and keeps its
   state. Tiles run in turn (`lax.map`): a member waits only for its tile's
   slowest. The tile depends on where the loop runs (`default_tile`): on a CPU
-  32 members, so a tile's tape stays in cache (double pendulum ×1024, tiles of
-  16, 32, 64, 128: 2.5, 2.1, 2.8, 3.5× heyoka's batch mode, loaded machine); on
+  32 members, so a tile's tape stays in cache (double pendulum ×1024 to t = 10
+  at tol 1e-12, one pinned core, tiles timed in turn in one run: tiles of 8, 16,
+  24, 32, 48, 64 at 2.22, 2.03, 2.09, 1.99, 2.13, 2.14× heyoka's batch mode; the
+  members wait for their tile's slowest: 1.1, 2.2, 4.3 % more member-steps than
+  taken at 16, 32, 64, θ₁ in order); on
   a GPU or TPU the whole batch up to `ACCELERATOR_TILE` members, since a kernel
   over 32 lanes leaves the device idle (double pendulum ×10⁴ to t = 10 at 1e-12
   on an H200: tiles of 32, 631 members/s; the whole batch, 7.4e4/s);
