@@ -6,8 +6,8 @@ itself (`heyoka.lagrangian`) and integrated by `taylor_adaptive` /
 `taylor_adaptive_batch`; **lagjax→heyoka** — the equations derived by lagjax
 (`lj.Lagrangian(L).acceleration`), their jaxpr translated into heyoka's expressions
 (`heyoka_integrate`); **lagjax Taylor (JAX)** — the JAX-native Taylor integrator
-(`lagjax.taylor.taylor_integrate`, jitted: its coefficients from the jaxpr, each
-order one matrix product, `lagjax.taylor.order_map`); **lagjax Dopri8** — `lj.simulate` with `diffrax.Dopri8` at
+(`lagjax.taylor.taylor_integrate`, jitted: its coefficients from the jaxpr, the
+orders on a tape, `lagjax.taylor.tape`); **lagjax Dopri8** — `lj.simulate` with `diffrax.Dopri8` at
 rtol = atol = 1e-14, jitted; **simulate(Taylor heyoka)** — what a user writes,
 `lj.simulate(lag, y0, solver=lj.Taylor(backend="heyoka"))`, checks and all, the
 solver made once like any diffrax solver (making an `lj.Taylor` is an equinox

@@ -14,9 +14,11 @@ Three sweeps over the orders give the same numbers: `unroll=True` writes every
 order out (static slices, one straight-line program; XLA's CPU fusion then
 recomputes shared values in every consumer: 14 000 multiplications per step of
 the double pendulum's batch for ~3 000 in the recurrences, and a minute to
-compile), `unroll=False` runs a `fori_loop` over k: for a scalar graph of one
-trajectory each order is one matrix product (`order_map`), for a scalar graph of
-a batch the tape (`tape`), else one series array per value.
+compile), `unroll=False` runs a loop over k: for a scalar graph, of one
+trajectory or of a batch, the tape (`tape`), else one series array per value.
+(Until the tape's fifth-session form, one trajectory ran each order as one
+matrix product of the graph's linear map; the tape took 0.62–0.67× its time on
+the double pendulum and 0.27–0.31× on the n-link chain's n = 2.)
 
 A batch (`batched_leaves`) carries the members on the last axis of every value:
 in a scalar graph each operation is then one vector operation over them.
@@ -37,7 +39,6 @@ import jax.numpy as jnp
 from lagjax._linalg.scalarize import as_object_array, objects_from_scalars, scalarize
 
 from .graph import Graph, lower
-from .order_map import fits, order_map_coefficients
 from .recurrences import with_coefficient
 from .tape import supports, tape_coefficients
 
@@ -210,8 +211,6 @@ def graph_coefficients(
         batch = _Batch(chosen, y0.shape[-1], graph.scalar)
     values = _order_zero(graph, inputs, batch)
     if not unroll and supports(graph):
-        if batch is None and fits(graph):
-            return order_map_coefficients(graph, values, order, y0.dtype)
         shape = () if batch is None else (batch.members,)
         return tape_coefficients(graph, values, order, shape, y0.dtype)
     series = {}
@@ -260,7 +259,7 @@ def taylor_coefficients(
 
     y0 is a flat float array. `scalar=True` lowers f to a scalar graph where it
     can (`lower_vector_field`); with `unroll=False` its orders are then computed
-    by `order_map`. Raises `NotImplementedError` naming the first primitive of
+    on the tape (`tape`). Raises `NotImplementedError` naming the first primitive of
     the vector field that has no Taylor rule.
     """
     y0 = jnp.asarray(y0)

@@ -198,7 +198,7 @@ def taylor_integrate(
     t0, t1 = jnp.asarray(t0, y0.dtype), jnp.asarray(t1, y0.dtype)
     final_only = ts is None
     ts = jnp.atleast_1d(jnp.asarray(t1 if ts is None else ts, y0.dtype))
-    # A scalar graph where f allows: each order is then one matrix product.
+    # A scalar graph where f allows: its orders then run on the tape (`tape`).
     graph, leaves = lower_vector_field(vector_field, t0, y0, args, scalar=True)
     direction = jnp.where(t1 >= t0, 1.0, -1.0).astype(y0.dtype)
     save = _saver(ts, direction)
