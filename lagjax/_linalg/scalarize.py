@@ -31,6 +31,8 @@ import numpy as np
 from jax import lax
 
 from lagjax._linalg.jaxpr_interpreter import CALLS, evaluate_jaxpr
+from lagjax._linalg.object_arrays import objects_from_scalars
+from lagjax._linalg.object_arrays import to_objects as _to_objects
 from lagjax._linalg.scalarized_branches import scalar_cond
 
 MAX_SCALARIZED_SIZE = 64
@@ -153,15 +155,6 @@ def _check(jaxpr: Any, branches: bool = False) -> None:
         for var in (*eqn.invars, *eqn.outvars):
             if math.prod(getattr(var.aval, "shape", ())) > MAX_SCALARIZED_SIZE:
                 raise _Unsupported(f"{name} on an array of shape {var.aval.shape}")
-
-
-def _to_objects(value: Any) -> np.ndarray:
-    """An array (concrete or traced) as an object array of its scalar elements."""
-    shape = np.shape(value)
-    out = np.empty(shape, dtype=object)
-    for index in np.ndindex(*shape):
-        out[index] = value[index] if shape else value
-    return out
 
 
 def _elementwise(eqn: Any, operands: Sequence[np.ndarray]) -> np.ndarray:
@@ -399,14 +392,6 @@ def scalarize_outputs(
 def as_object_array(value: Any) -> np.ndarray:
     """Public alias of the element split used for inputs (e.g. parameters in args)."""
     return _to_objects(value)
-
-
-def objects_from_scalars(scalars: Sequence[Any]) -> np.ndarray:
-    """A 1-D object array holding the given JAX scalars (no conversion to NumPy)."""
-    out = np.empty(len(scalars), dtype=object)
-    for i, scalar in enumerate(scalars):
-        out[i] = scalar
-    return out
 
 
 def scalar_argument_function(fn: Callable[..., Any], *examples: Any) -> Callable:

@@ -29,17 +29,12 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
+from lagjax._linalg.object_arrays import objects_from_scalars, to_objects
+
 # scalarizable(jaxpr): whether the jaxpr can be evaluated on scalars;
 # evaluate(jaxpr, consts, object_arrays) evaluates it on scalars.
 Scalarizable = Callable[[Any], bool]
 Evaluate = Callable[[Any, Sequence[Any], Sequence[np.ndarray]], list]
-
-
-def _object_array(scalars: Sequence[Any], shape: tuple) -> np.ndarray:
-    out = np.empty(len(scalars), dtype=object)
-    for i, scalar in enumerate(scalars):
-        out[i] = scalar
-    return out.reshape(shape)
 
 
 def _split(flat: Sequence[Any], avals: Sequence[Any]) -> list[np.ndarray]:
@@ -47,7 +42,7 @@ def _split(flat: Sequence[Any], avals: Sequence[Any]) -> list[np.ndarray]:
     sizes = [math.prod(aval.shape) for aval in avals]
     bounds = np.cumsum([0, *sizes])
     return [
-        _object_array(flat[start:stop], aval.shape)
+        objects_from_scalars(flat[start:stop]).reshape(aval.shape)
         for (start, stop), aval in zip(itertools.pairwise(bounds), avals)
     ]
 
@@ -89,7 +84,9 @@ def scalar_cond(
     def branch(closed: Any) -> Callable:
         if not scalarizable(closed.jaxpr):
             written = _as_written(closed, in_avals)
-            return lambda *flat: _elements(_unstack(written(*flat)), out_avals)
+            return lambda *flat: _elements(
+                [to_objects(x) for x in written(*flat)], out_avals
+            )
 
         def on_scalars(*flat: Any) -> list:
             outs = evaluate(closed.jaxpr, closed.consts, _split(flat, in_avals))
@@ -101,15 +98,3 @@ def scalar_cond(
     flat = _elements(operands[1:], in_avals)
     results = lax.switch(index, [branch(b) for b in eqn.params["branches"]], *flat)
     return _split(results, out_avals)
-
-
-def _unstack(arrays: Sequence[Any]) -> list[np.ndarray]:
-    """Arrays (traced) as object arrays of their elements."""
-    out = []
-    for array in arrays:
-        shape = np.shape(array)
-        objects = np.empty(shape, dtype=object)
-        for position in np.ndindex(*shape):
-            objects[position] = array[position] if shape else array
-        out.append(objects)
-    return out
