@@ -71,6 +71,7 @@ from lagjax.phase_space import poincare_section as poincare_section
 from lagjax.phase_space import states_on_energy_shell as states_on_energy_shell
 from lagjax.rigid.body import RigidBody as RigidBody
 from lagjax.solvers.bit_reversible import BitReversible as BitReversible
+from lagjax.solvers.chain import ChainRegularization as ChainRegularization
 from lagjax.solvers.extrapolation import GraggBulirschStoer as GraggBulirschStoer
 from lagjax.solvers.implicit import GaussLegendre as GaussLegendre
 from lagjax.solvers.implicit import ImplicitMidpoint as ImplicitMidpoint

@@ -52,6 +52,7 @@ from lagjax._core.precision import (
 )
 from lagjax._core.static_values import Constant
 from lagjax._core.system import AbstractSystem
+from lagjax._integrate.chain_run import run_chain
 from lagjax._integrate.checks.forward_mode import forward_mode_explained
 from lagjax._integrate.checks.inputs import check_save_choice, check_simulate_inputs
 from lagjax._integrate.checks.late_failure import raise_if_failed
@@ -79,6 +80,7 @@ from lagjax._integrate.time_transformed_run import (
     run_time_transformed,
 )
 from lagjax._integrate.wisdom_holman_run import run_wisdom_holman
+from lagjax.solvers.chain import ChainRegularization
 from lagjax.solvers.time_transformed import TimeTransformed
 from lagjax.solvers.wisdom_holman import WisdomHolman
 from lagjax.taylor.solver import Taylor
@@ -202,6 +204,12 @@ def simulate(
                                     dense=dense, event=event, progress=progress,
                                     stepsize_controller=stepsize_controller,
                                     progress_meter=progress_meter)  # fmt: skip
+    if isinstance(solver, ChainRegularization):  # chain coordinates, dt is ds
+        return run_chain(system, y0, t0, t1, dt, solver, ts, args, max_steps, throw,
+                         given_tolerances, saveat=saveat, adjoint=adjoint, dense=dense,
+                         event=event, progress=progress,
+                         stepsize_controller=stepsize_controller,
+                         progress_meter=progress_meter)  # fmt: skip
     t1, dt = defaults(system, t0, t1, dt, solver, stepsize_controller, tolerance_run)
     y0 = check_simulate_inputs(system, y0, t0, t1, dt, solver, ts, args, max_steps,
                                rtol, atol)  # fmt: skip
