@@ -26,6 +26,47 @@ largest |P| and |L|, the largest position difference at t = 30 from IAS15 on the
 unshifted configuration (shifted states shifted back), and the escape (the
 lightest body's energy relative to the binary at t = 70, positive: it escapes).
 
+2026-11-27, core 1 pinned, the other core busy (load ≈ 2.7; heyoka at 31 ms,
+twice its quiet time), seven interleaved rounds, the fastest of each, inside
+`jax.jit` unless marked:
+
+| configuration | method | time | / heyoka | energy | Δq(t=30) | steps (refused) |
+|---|---|---|---|---|---|---|
+| as given | chain GBS tol 1e-13 | 14.5 ms | 0.47 | 1.1e-12 | 3.7e-9 | 3,318 (212) |
+| as given | chain GBS tol 3e-14 | 15.8 ms | 0.52 | 3.1e-13 | 3.7e-9 | 3,896 (210) |
+| as given | chain GBS tol 1e-14 | 16.0 ms | 0.52 | 1.2e-13 | 3.7e-9 | 4,483 (176) |
+| as given | chain GBS tol 3e-14, eager | 27.9 ms | 0.91 | 3.1e-13 | 3.7e-9 | |
+| as given | Jacobi GBS tol 3e-14 | 16.7 ms | 0.55 | 2.6e-13 | 3.7e-9 | 3,915 (198) |
+| as given | barycentric GBS tol 3e-14 | 18.0 ms | 0.59 | 6.5e-13 | 3.7e-9 | 3,976 (199) |
+| as given | heyoka tol 1e-16 | 30.6 ms | 1 | 1.4e-9 | 5.5e-8 | |
+| as given | IAS15 | 95.4 ms | 3.1 | 9.9e-11 | 0 | |
+| +10 | chain GBS tol 3e-14 | 15.5 ms | 0.61 | 2.5e-13 | 3.7e-9 | |
+| +10 | barycentric GBS tol 3e-14 | 22.1 ms | 0.87 | 3.0e-11 | 3.6e-9 | |
+| +10 | heyoka tol 1e-16 | 25.5 ms | 1 | 8.4e-9 | 3.2e-7 | |
+| +10 | IAS15 | 95.5 ms | 3.8 | 4.7e-10 | 1.1e-8 | |
+| +100 | chain GBS tol 3e-14 | 15.7 ms | 0.04 | 4.9e-13 | 3.7e-9 | |
+| +100 | barycentric GBS tol 3e-14 | 18.2 ms | 0.04 | 6.1e-11 | 3.9e-9 | |
+| +100 | heyoka tol 1e-16 | 405 ms | 1 | 3.5e-5 | 3.6e-6 | |
+| +100 | IAS15 | 81.9 ms | 0.20 | 1.2e-8 | 4.4e-7 | |
+
+Every chain row re-formed its chain 91 times, kept |P| ≤ 4e-15 and |L| ≤ 2e-13,
+and saw the lightest body escape (E_rel = +5.283); on the shifted configurations
+it took the same steps as on the given one. The chain costs what the fixed
+Jacobi coordinates cost (0.95× their time), and less than the barycentric run
+(0.88×, 4.1 against 4.5 µs a step). An earlier run of the same rows (load ≈ 2.4,
+heyoka at 46 ms) gave 0.28×, 0.36× and 0.40× heyoka at tol 1e-13, 3e-14, 1e-14.
+Compilation (the earlier run): 3.0–3.3 s per tolerance, 1.3–1.5× the barycentric
+run's 2.3 s (the first row 6.9 s, with the process's warm-up).
+Shifted by 100, heyoka's run at tol 1e-16 takes 13× longer and lets the
+lightest body escape with E_rel = +44 (its separations lose two digits too).
+
+The energies above are at t = 0, 1, …, 70. Saved every 0.05 instead, a save that
+falls inside a close pericentre passage of the escaping binary reads more:
+5.0e-11 at t = 62.35 (tol 1e-13; 1.6e-11 barycentric), where r = 7.6e-3 and
+U = −V ≈ 2600. The logarithmic Hamiltonian keeps Γ = ln((T + p_t)/U) to ~2e-13
+there, so H − E ≈ U·δΓ while U is large; the error returns to ~1e-12 after the
+passage (8.1e-13 at t = 70).
+
 References: Mikkola & Aarseth, Celest. Mech. 57, 439 (1993); Mikkola & Merritt,
 AJ 135, 2398 (2008); Rein & Spiegel, MNRAS 446, 1424 (2015) (IAS15); Biscani &
 Izzo, MNRAS 504, 2614 (2021) (heyoka).
@@ -45,6 +86,7 @@ import numpy as np
 
 import lagjax as lj
 from benchmarks.close_encounters import heyoka_run, measures, rebound_run
+from benchmarks.pythagorean_jacobi import jacobi_run
 from lagjax.scenes.pythagorean import PythagoreanThreeBody
 
 COMPARE_AT = 30
@@ -128,6 +170,12 @@ def rows_to_time(scene, ts: np.ndarray, shifts, tolerances) -> dict:
     rows[(shifts[0], f"chain GBS tol={tol:.0e} eager")] = eager_run(
         scene, ts, chain_solver(tol), scene.initial_state()
     )
+    # Fixed Jacobi coordinates with the 4-5 pair inside, written for this problem
+    # alone (`benchmarks.pythagorean_jacobi`): what the chain's generality costs.
+    solver = lj.TimeTransformed(lj.GraggBulirschStoer(rtol=tol, atol=tol))
+    rows[(shifts[0], f"Jacobi GBS tol={tol:.0e} jit")] = jacobi_run(
+        scene, ts, solver, FIRST_STEP, True
+    )
     return rows
 
 
@@ -167,8 +215,9 @@ def report(scene, rows: dict, timings: dict) -> list[dict]:
         table.append(row)
         ratio = "" if heyoka is None else f" {row['heyoka_ratio']:5.2f}x heyoka"
         counts = "" if row["steps"] is None else (
-            f" {row['steps']} steps ({row['rejected']} refused, "
-            f"{row['rechains']} re-chained)")  # fmt: skip
+            f" {row['steps']} steps ({row['rejected']} refused"
+            + ("" if row["rechains"] is None else f", {row['rechains']} re-chained")
+            + ")")  # fmt: skip
         print(f"+{shift:<5g} {name:34s} {warm * 1e3:7.2f} ms (first {first:5.2f} s)"
               f"{ratio}  energy {row['energy']:.1e}  P {row['momentum']:.0e}  "
               f"L {row['angular_momentum']:.0e}  dq(30) "

@@ -37,7 +37,12 @@ from jax.core import Tracer
 
 from lagjax._core.precision import cast_floats, working_dtype
 from lagjax._integrate.checks.inputs import check_simulate_inputs
-from lagjax._integrate.time_transformed_run import _partial_step, _stepper, _time
+from lagjax._integrate.time_transformed_run import (
+    _one_step,
+    _partial_step,
+    _stepper,
+    _time,
+)
 from lagjax.solvers.chain import CHAIN_HAMILTONIAN, ChainBodies, ChainRegularization
 from lagjax.solvers.chain_coordinates import (
     ChainState,
@@ -239,24 +244,15 @@ def _compiled_run(system, bodies, y0, solver, t0, ds, save_ts, max_steps):
         walk = lax.while_loop(
             lambda w: (_time(w.y) < tau) & (w.steps < limit) & valid, one_step, walk
         )
-        return walk, walk.start
+        return walk, (*walk.start, _time(walk.y) >= tau)
 
     count = jnp.zeros((), jnp.int32)
     walk = _Walk(y_start, state0, ds, chain.order, count, count, count,
                  (y_start, ds, chain.order))  # fmt: skip
-    end, (starts, steps, orders) = lax.scan(to_save, walk, save_ts)
-    landed = jax.vmap(
-        lambda y, tau, ds, order: _partial_step(
-            terms, solver.splitting, y, tau, ds, flow_args(order)
-        )
-    )(starts, save_ts, steps, orders)
-    (W, _), (X, t_landed) = landed
-    centres = centre + (save_ts - t0)[:, None] * momentum / jnp.sum(masses)
-    q, p = jax.vmap(
-        lambda X, W, order, centre: from_chain(
-            masses, ChainState(X, W, order), centre, momentum
-        )
-    )(X, W, orders, centres)
+    end, starts = lax.scan(to_save, walk, save_ts)
+    q, p, t_landed = _states_at_saves(
+        solver, terms, flow_args, starts, save_ts, (masses, centre, momentum, t0)
+    )
     reached = (_time(end.y) >= save_ts[-1]) & valid
     result = diffrax.RESULTS.where(
         reached, diffrax.RESULTS.successful, diffrax.RESULTS.max_steps_reached
@@ -266,8 +262,31 @@ def _compiled_run(system, bodies, y0, solver, t0, ds, save_ts, max_steps):
         num_accepted_steps=end.steps - end.rejected,
         num_rejected_steps=end.rejected,
         num_rechains=end.rechains,
-        time_residual=jnp.max(jnp.abs(t_landed - save_ts)),
+        time_residual=jnp.nanmax(jnp.abs(t_landed - save_ts)),
         energy_start=-y_start[0][1] + jnp.sum(momentum**2) / (2 * jnp.sum(masses)),
     )
     return Trajectory(ts=save_ts, ys=(q, p), system=system, args=bodies,
                       run_stats=stats, result=result, solver_name=solver.name)  # fmt: skip
+
+
+def _states_at_saves(solver, terms, flow_args, starts, save_ts, bodies):
+    """(q, p, t) at the save times in body order: from each recorded step start
+    a partial step that ends at the save time (`_partial_step`), taken back from
+    the chain in force at that step; NaN where the run stopped short of it."""
+    y, ds, orders, reached = starts
+    masses, centre, momentum, t0 = bodies
+    landed = jax.vmap(
+        lambda y, tau, ds, order: _partial_step(
+            _one_step(terms, solver.splitting, flow_args(order)), y, tau, ds
+        )
+    )(y, save_ts, ds, orders)
+    (W, _), (X, t_landed) = landed
+    centres = centre + (save_ts - t0)[:, None] * momentum / jnp.sum(masses)
+    q, p = jax.vmap(
+        lambda X, W, order, centre: from_chain(
+            masses, ChainState(X, W, order), centre, momentum
+        )
+    )(X, W, orders, centres)
+    unreached = ~reached[:, None, None]
+    q, p = (jnp.where(unreached, jnp.nan, x) for x in (q, p))
+    return q, p, jnp.where(reached, t_landed, jnp.nan)

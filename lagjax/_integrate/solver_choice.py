@@ -68,6 +68,12 @@ HIGH_ORDER_RTOL = 1e-9
 # ds = 0.005, 488 ms (5.7e-12; KahanLi8's round-off floor there is 4e-11, and no
 # table reached 1e-12); on the outer solar system to 2e4 days Dopri8 takes 190
 # steps (energy 6e-10) and WisdomHolman is the method for long runs.
+# lj.ChainRegularization(GraggBulirschStoer) at the same rtol (eager, one pinned
+# core, loaded machine) keeps the energy 2.6-1500x better but took 1.1-2.7x Dopri8's
+# time: the Pythagorean problem at 1e-10 / 1e-12 (1401 saves) 23 / 22 ms against
+# 15 / 19 ms, the outer solar system to 2e4 days 9.4 / 11.4 ms against 4.0 / 4.2
+# ms (energy 4e-13 against 6e-10 at 1e-12), so it is no default; at equal energy
+# on close encounters it is the method (`benchmarks/pythagorean_chain.py`).
 
 
 def default_solver(
