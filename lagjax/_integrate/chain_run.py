@@ -37,12 +37,7 @@ from jax.core import Tracer
 
 from lagjax._core.precision import cast_floats, working_dtype
 from lagjax._integrate.checks.inputs import check_simulate_inputs
-from lagjax._integrate.time_transformed_run import (
-    _one_step,
-    _partial_step,
-    _stepper,
-    _time,
-)
+from lagjax._integrate.time_transformed_run import _partial_step, _stepper, _time
 from lagjax.solvers.chain import CHAIN_HAMILTONIAN, ChainBodies, ChainRegularization
 from lagjax.solvers.chain_coordinates import (
     ChainState,
@@ -275,11 +270,17 @@ def _states_at_saves(solver, terms, flow_args, starts, save_ts, bodies):
     the chain in force at that step; NaN where the run stopped short of it."""
     y, ds, orders, reached = starts
     masses, centre, momentum, t0 = bodies
-    landed = jax.vmap(
-        lambda y, tau, ds, order: _partial_step(
-            _one_step(terms, solver.splitting, flow_args(order)), y, tau, ds
-        )
-    )(y, save_ts, ds, orders)
+    splitting = solver.splitting
+
+    def landed_at(y, tau, ds, order):
+        def one_step(y, h):  # a step of fictitious length h in this chain
+            zero = jnp.zeros((), h.dtype)
+            state = splitting.init(terms, zero, h, y, flow_args(order))
+            return splitting.step(terms, zero, h, y, flow_args(order), state, False)[0]
+
+        return _partial_step(one_step, y, tau, ds)
+
+    landed = jax.vmap(landed_at)(y, save_ts, ds, orders)
     (W, _), (X, t_landed) = landed
     centres = centre + (save_ts - t0)[:, None] * momentum / jnp.sum(masses)
     q, p = jax.vmap(
