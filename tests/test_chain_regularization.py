@@ -119,6 +119,17 @@ def test_rechaining_picks_the_closest_pair_and_keeps_the_state():
         q_back, p_back = from_chain(masses, state, masses @ q / 6.5, momentum)
         np.testing.assert_allclose(q_back, q, rtol=0, atol=1e-15 * 4)
         np.testing.assert_allclose(p_back, p, rtol=0, atol=1e-15 * 4)
+
+    # The change of chain is canonical too: (X, W) -> (X', W') at the new order.
+    def change(z):
+        X, W = (half.reshape(3, 3) for half in jnp.split(z, 2))
+        state = _rechained(ChainState(X, W, jnp.asarray(old.order)))[0]
+        return jnp.concatenate([state.X.ravel(), state.W.ravel()])
+
+    z = np.concatenate([old.X.ravel(), old.W.ravel()])
+    jacobian = np.asarray(jax.jit(jax.jacfwd(change))(z))
+    form = np.block([[np.zeros((9, 9)), np.eye(9)], [-np.eye(9), np.zeros((9, 9))]])
+    np.testing.assert_allclose(jacobian.T @ form @ jacobian, form, atol=1e-14)
     # Built again from its own separations the chain stays, bit for bit.
     again, changed_again = rechained(new)
     assert not bool(changed_again)
