@@ -47,6 +47,9 @@ from jax.core import Tracer
 
 from lagjax._core.precision import cast_floats, working_dtype
 from lagjax._integrate.checks.inputs import MAX_FIXED_STEPS, check_simulate_inputs
+from lagjax._integrate.time_transformed_double_double import double_double_steps
+from lagjax._linalg.double_double import rounded_tree
+from lagjax._linalg.double_double_arithmetic import DoubleDouble
 from lagjax.solvers.time_transformed import (
     TimeTransformed,
     extended_state,
@@ -181,8 +184,9 @@ class _Walk(NamedTuple):
 
 
 def _time(y: Any) -> jax.Array:
-    """t of the extended state ((p, p_t), (q, t))."""
-    return y[1][1]
+    """t of the extended state ((p, p_t), (q, t)) (its high part in double-double)."""
+    t = y[1][1]
+    return t.hi if isinstance(t, DoubleDouble) else t
 
 
 def _stepper(terms: Any, splitting: Any, args: Any):
@@ -284,8 +288,12 @@ def _compiled_run(system, y0, args, solver, t0, ds, save_ts, max_steps):
     terms = solver.terms(system)
     splitting = solver.splitting
     state0 = extended_state(system, y0, t0, args)
-    advance = _stepper(terms, splitting, args)
-    solver_state0 = splitting.init(terms, jnp.zeros((), ds.dtype), ds, state0, args)
+    if solver.precision == "double-double":
+        advance, start = double_double_steps(terms, splitting, args)
+        state0, solver_state0 = start(state0)
+    else:
+        advance = _stepper(terms, splitting, args)
+        solver_state0 = splitting.init(terms, jnp.zeros((), ds.dtype), ds, state0, args)
     if max_steps is None:
         run = _walk_to_saves(advance, state0, solver_state0, ds, save_ts)
     else:
@@ -293,9 +301,12 @@ def _compiled_run(system, y0, args, solver, t0, ds, save_ts, max_steps):
             advance, state0, solver_state0, ds, save_ts, t0, max_steps
         )
     starts, steps, taken, rejected, reached = run
-    landed = jax.vmap(
-        lambda y, tau, ds: _partial_step(terms, splitting, y, tau, ds, args)
-    )(starts, save_ts, steps)
+    # In double-double the partial steps are float64 steps from the rounded
+    # starts (`time_transformed_double_double`): one step's round-off.
+    one_step = _one_step(terms, splitting, args)
+    landed = jax.vmap(lambda y, tau, ds: _partial_step(one_step, y, tau, ds))(
+        rounded_tree(starts), save_ts, steps
+    )
     (p, _), (q, t_landed) = landed
     result = diffrax.RESULTS.where(
         reached, diffrax.RESULTS.successful, diffrax.RESULTS.max_steps_reached
@@ -305,7 +316,7 @@ def _compiled_run(system, y0, args, solver, t0, ds, save_ts, max_steps):
         num_accepted_steps=taken - rejected,
         num_rejected_steps=rejected,
         time_residual=jnp.max(jnp.abs(t_landed - save_ts)),
-        energy_start=-state0[0][1],
+        energy_start=-rounded_tree(state0)[0][1],
     )
     return Trajectory(
         ts=save_ts,
@@ -328,19 +339,28 @@ def _fill_forward(slots: Any, saves: int) -> Any:
     return jax.tree_util.tree_map(lambda buffer: buffer[source], slots)
 
 
-def _partial_step(terms, splitting, y, tau, ds, args):
+def _one_step(terms: Any, splitting: Any, args: Any):
+    """`one_step(y, h) -> y1`: one step of the method of fictitious length h."""
+
+    def one_step(y, h):
+        zero = jnp.zeros((), h.dtype)
+        state = splitting.init(terms, zero, h, y, args)
+        y1, *_ = splitting.step(terms, zero, h, y, args, state, False)
+        return y1
+
+    return one_step
+
+
+def _partial_step(one_step, y, tau, ds):
     """Φ_{σ ds}(y) with σ solved by the secant method so that it ends at time tau.
 
     t(σ) is nearly linear, so from σ = 0 (t = t_n, no step needed) and σ = 1 the
     secant iterates reach round-off in four or five evaluations. One copy of the
     step in one loop body (Newton with `jvp` compiled about three times longer).
     """
-    zero = jnp.zeros((), ds.dtype)
 
     def advance(sigma):
-        state = splitting.init(terms, zero, sigma * ds, y, args)
-        y1, *_ = splitting.step(terms, zero, sigma * ds, y, args, state, False)
-        return y1
+        return one_step(y, sigma * ds)
 
     def secant(_, carry):
         (sigma_old, t_old), (sigma, _) = carry

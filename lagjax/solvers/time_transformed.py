@@ -110,10 +110,20 @@ class TimeTransformed(eqx.Module):
       (`lagjax.solvers.extrapolation`).
     - `weight`: $w(x) > 0$ with $dt/ds = w(-V)$ on the solution; default
       $1/x$, the logarithmic Hamiltonian.
+    - `precision`: `"double"` (default) or `"double-double"`: every step in
+      double-double arithmetic (about 32 digits, `lagjax._linalg.double_double`),
+      the states rounded to float64 only at the saves. In float64 the log
+      Hamiltonian that the method keeps random-walks by round-off, about √n ε
+      after n steps, and at the pericentre of an eccentric orbit the energy error
+      is that walk times 2/(1 − e) (Kepler e = 0.99, 1000 periods: 3.6e-12);
+      in double-double the walk is 10¹⁶ times smaller. It costs about 17× a
+      float64 step, needs a splitting table (not `GraggBulirschStoer`) and
+      T and V made of rational arithmetic and square roots (gravitation, springs).
     """
 
     splitting: AbstractSplittingSolver | GraggBulirschStoer
     weight: Callable[[Any], Any] = logarithmic_weight
+    precision: str = eqx.field(default="double", static=True)
 
     @property
     def name(self) -> str:
@@ -127,6 +137,19 @@ class TimeTransformed(eqx.Module):
                 "TimeTransformed wraps a lagjax splitting solver (StormerVerlet, "
                 "Yoshida4, BlanesMoan6, …) or GraggBulirschStoer; got "
                 f"{type(self.splitting).__name__}"
+            )
+        if self.precision not in ("double", "double-double"):
+            raise ValueError(
+                "TimeTransformed: precision is 'double' or 'double-double', got "
+                f"{self.precision!r}"
+            )
+        if self.precision == "double-double" and isinstance(
+            self.splitting, GraggBulirschStoer
+        ):
+            raise ValueError(
+                "TimeTransformed(precision='double-double') runs a splitting table "
+                "(StormerVerlet, Yoshida4, KahanLi8, ...); GraggBulirschStoer's "
+                "step control is float64 only"
             )
         if self.splitting.needs_quadratic_kinetic:
             raise ValueError(
