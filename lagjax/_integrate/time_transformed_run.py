@@ -288,8 +288,9 @@ def _compiled_run(system, y0, args, solver, t0, ds, save_ts, max_steps):
     terms = solver.terms(system)
     splitting = solver.splitting
     state0 = extended_state(system, y0, t0, args)
+    landing_step = None
     if solver.precision == "double-double":
-        advance, start = double_double_steps(terms, splitting, args)
+        advance, landing_step, start = double_double_steps(terms, splitting, args)
         state0, solver_state0 = start(state0)
     else:
         advance = _stepper(terms, splitting, args)
@@ -301,13 +302,17 @@ def _compiled_run(system, y0, args, solver, t0, ds, save_ts, max_steps):
             advance, state0, solver_state0, ds, save_ts, t0, max_steps
         )
     starts, steps, taken, rejected, reached = run
-    # In double-double the partial steps are float64 steps from the rounded
-    # starts (`time_transformed_double_double`): one step's round-off.
     one_step = _one_step(terms, splitting, args)
-    landed = jax.vmap(lambda y, tau, ds: _partial_step(one_step, y, tau, ds))(
-        rounded_tree(starts), save_ts, steps
-    )
-    (p, _), (q, t_landed) = landed
+
+    def to_save(y, tau, ds):
+        if landing_step is None:
+            return _partial_step(one_step, y, tau, ds)
+        # Double-double: σ by float64 secant iterations from the rounded start,
+        # then the step itself in double-double (`time_transformed_double_double`).
+        landing = lambda sigma: rounded_tree(landing_step(y, sigma * ds))
+        return _partial_step(one_step, rounded_tree(y), tau, ds, landing)
+
+    (p, _), (q, t_landed) = jax.vmap(to_save)(starts, save_ts, steps)
     result = diffrax.RESULTS.where(
         reached, diffrax.RESULTS.successful, diffrax.RESULTS.max_steps_reached
     )
@@ -351,12 +356,15 @@ def _one_step(terms: Any, splitting: Any, args: Any):
     return one_step
 
 
-def _partial_step(one_step, y, tau, ds):
+def _partial_step(one_step, y, tau, ds, landing=None):
     """Φ_{σ ds}(y) with σ solved by the secant method so that it ends at time tau.
 
     t(σ) is nearly linear, so from σ = 0 (t = t_n, no step needed) and σ = 1 the
     secant iterates reach round-off in four or five evaluations. One copy of the
     step in one loop body (Newton with `jvp` compiled about three times longer).
+    `landing(σ)`, when given, takes the final step instead of `one_step` (the
+    double-double run: σ from float64 iterations, the step itself in
+    double-double).
     """
 
     def advance(sigma):
@@ -375,5 +383,5 @@ def _partial_step(one_step, y, tau, ds):
     one = jnp.ones((), ds.dtype)
     start = ((0 * one, _time(y)), (one, y))
     # fori_loop with a fixed trip count is a scan: reverse mode runs through it.
-    _, (_, landed) = lax.fori_loop(0, SECANT_ITERATIONS, secant, start)
-    return landed
+    (sigma, _), (_, landed) = lax.fori_loop(0, SECANT_ITERATIONS, secant, start)
+    return landed if landing is None else landing(sigma)
