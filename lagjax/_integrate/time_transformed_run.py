@@ -309,7 +309,8 @@ def _compiled_run(system, y0, args, solver, t0, ds, save_ts, max_steps):
             return _partial_step(one_step, y, tau, ds)
         # Double-double: σ by float64 secant iterations from the rounded start,
         # then the step itself in double-double (`time_transformed_double_double`).
-        landing = lambda sigma: rounded_tree(landing_step(y, sigma * ds))
+        step = landing_step
+        landing = lambda sigma: rounded_tree(step(y, sigma * ds))
         return _partial_step(one_step, rounded_tree(y), tau, ds, landing)
 
     (p, _), (q, t_landed) = jax.vmap(to_save)(starts, save_ts, steps)
