@@ -82,7 +82,11 @@ class PythagoreanThreeBody(AbstractScene):
     energy to ~2e-13 to t = 70 in about 390,000 steps;
     `TimeTransformed(GraggBulirschStoer(rtol=1e-13, atol=1e-13))`, the extrapolated
     leapfrog, to ~5e-13 in about 3,400 steps, about 5 times faster
-    (`benchmarks/close_encounters.py`).
+    (`benchmarks/close_encounters.py`). `lj.ChainRegularization(
+    GraggBulirschStoer(rtol=3e-14, atol=3e-14))` integrates the separations
+    along a chain of the closest pairs instead of the positions: 3.1e-13, and
+    as little with the whole configuration shifted by 100, where the positions'
+    round-off costs the barycentric run 6.1e-11 (`benchmarks/pythagorean_chain.py`).
     """
 
     masses: jax.Array = parameter((3.0, 4.0, 5.0), positive=True)
