@@ -36,8 +36,12 @@ import numpy as np
 from jax.core import Tracer
 
 from lagjax._core.precision import cast_floats, working_dtype
-from lagjax._integrate.checks.inputs import check_simulate_inputs
-from lagjax._integrate.time_transformed_run import _partial_step, _stepper, _time
+from lagjax._integrate.time_transformed_run import (
+    _partial_step,
+    _stepper,
+    _time,
+    check_fictitious_time_inputs,
+)
 from lagjax.solvers.chain import CHAIN_HAMILTONIAN, ChainBodies, ChainRegularization
 from lagjax.solvers.chain_coordinates import (
     ChainState,
@@ -69,21 +73,10 @@ def run_chain(
             "them to its solver, e.g. lj.ChainRegularization(lj.GraggBulirschStoer("
             "rtol=3e-14, atol=3e-14))"
         )
-    given = [name for name, value in options.items() if value not in (None, False)]
-    if given:
-        raise ValueError(
-            f"{solver.name} does not support {', '.join(given)}: it saves at the "
-            "physical times ts=..., stepping by the fictitious step dt"
-        )
-    if ds is None:
-        raise ValueError(f"{solver.name} needs dt, the first fictitious step ds")
-    if not isinstance(ds, Tracer) and not float(ds) > 0:
-        raise ValueError(f"the fictitious step ds (dt) must be positive; got {ds}")
-    if t1 is None:
-        t1 = system.default_span()[0]
-    y0 = check_simulate_inputs(system, y0, t0, t1, None, None, ts, args, max_steps)
-    if not isinstance(t1, Tracer) and not float(t1) > float(t0):
-        raise ValueError(f"{solver.name} integrates forward: t1 must exceed t0")
+    y0, t1 = check_fictitious_time_inputs(
+        solver.name, "the first fictitious step ds",
+        system, y0, t0, t1, ds, ts, args, max_steps, options,
+    )  # fmt: skip
     system, args = system.resolve(args)
     if not isinstance(args, GravitatingBodies):
         raise TypeError(

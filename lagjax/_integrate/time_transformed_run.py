@@ -65,25 +65,10 @@ def run_time_transformed(
     ts: Any, args: Any, max_steps: int | None, throw: bool, **options: Any,
 ) -> Trajectory:  # fmt: skip
     """`simulate` for a `TimeTransformed` solver: the checks, the run, the verdict."""
-    given = [name for name, value in options.items() if value not in (None, False)]
-    if given:
-        raise ValueError(
-            f"{solver.name} does not support {', '.join(given)}: it saves at the "
-            "physical times ts=..., stepping by the fictitious step dt"
-        )
-    if ds is None:
-        raise ValueError(
-            f"{solver.name} needs dt, the fictitious step ds (dt/ds = w(−V))"
-        )
-    if not isinstance(ds, Tracer) and not float(ds) > 0:
-        raise ValueError(f"the fictitious step ds (dt) must be positive; got {ds}")
-    if t1 is None:
-        t1 = system.default_span()[0]
-    # ds is no time step (dt = w·ds): the times are checked as an adaptive run's,
-    # the number of steps below, from the physical step at the start.
-    y0 = check_simulate_inputs(system, y0, t0, t1, None, None, ts, args, max_steps)
-    if not isinstance(t1, Tracer) and not float(t1) > float(t0):
-        raise ValueError(f"{solver.name} integrates forward: t1 must exceed t0")
+    y0, t1 = check_fictitious_time_inputs(
+        solver.name, "the fictitious step ds (dt/ds = w(−V))",
+        system, y0, t0, t1, ds, ts, args, max_steps, options,
+    )  # fmt: skip
     system, args = system.resolve(args)
     dtype = working_dtype(y0)
     system.check_start(y0, t0, args, dtype)
@@ -115,6 +100,33 @@ def run_time_transformed(
             "or the weight dt/ds was not positive at the start",
         )
     return trajectory
+
+
+def check_fictitious_time_inputs(
+    name: str, step_meaning: str, system: Any, y0: Any, t0: Any, t1: Any, ds: Any,
+    ts: Any, args: Any, max_steps: int | None, options: dict[str, Any],
+) -> tuple[Any, Any]:  # fmt: skip
+    """The checks every run in fictitious time shares (`TimeTransformed`,
+    `ChainRegularization`): no other saving options, a positive fictitious step
+    `dt`, forward in time. Returns the checked y0 and t1 (the system's default
+    span when None)."""
+    given = [option for option, value in options.items() if value not in (None, False)]
+    if given:
+        raise ValueError(
+            f"{name} does not support {', '.join(given)}: it saves at the "
+            "physical times ts=..., stepping by the fictitious step dt"
+        )
+    if ds is None:
+        raise ValueError(f"{name} needs dt, {step_meaning}")
+    if not isinstance(ds, Tracer) and not float(ds) > 0:
+        raise ValueError(f"the fictitious step ds (dt) must be positive; got {ds}")
+    if t1 is None:
+        t1 = system.default_span()[0]
+    # ds is no time step (dt = w·ds): the times are checked as an adaptive run's.
+    y0 = check_simulate_inputs(system, y0, t0, t1, None, None, ts, args, max_steps)
+    if not isinstance(t1, Tracer) and not float(t1) > float(t0):
+        raise ValueError(f"{name} integrates forward: t1 must exceed t0")
+    return y0, t1
 
 
 def check_no_tolerances_for(solver: TimeTransformed, given: dict[str, Any]) -> None:
