@@ -12,6 +12,7 @@ import lagjax as lj
 from lagjax.taylor import RESULTS, taylor_integrate
 from lagjax.taylor.batch import taylor_integrate_batch
 from lagjax.taylor.coefficients import graph_coefficients, lower_vector_field
+from lagjax.taylor.tape import tape_shape
 from tests.helpers import lie_coefficients
 
 G = 9.81
@@ -91,6 +92,28 @@ def test_every_rule_on_the_tape_matches_nested_jvp():
         z0 = jnp.concatenate([y0, jnp.zeros(1)])
         reference = lie_coefficients(extended, z0, 5)[:, :2]
         np.testing.assert_allclose(ours[..., member], reference, rtol=1e-12, atol=1e-13)
+
+
+def test_a_carried_tape_gives_the_coefficients_of_a_fresh_one():
+    # The batch loop hands each step the previous step's tape: whatever it holds
+    # (here NaN) must not reach the coefficients, since every row an order reads
+    # is written first in the same call.
+    y0s = jnp.array([[0.5, 0.1], [2.0, -0.3], [-1.0, 0.7]])
+    graph, leaves = lower_vector_field(pendulum, 0.0, y0s[0], 1.5, scalar=True)
+    shape = tape_shape(graph, 8, (3,))
+
+    def coefficients(y, **tape):
+        return graph_coefficients(
+            graph, jnp.zeros(3), y.T, leaves, 8, unroll=False, batched_leaves=(False,),
+            **tape,
+        )  # fmt: skip
+
+    fresh = jax.jit(coefficients)(y0s)
+    carried, tape = jax.jit(coefficients)(y0s, tape=jnp.full(shape, jnp.nan))
+    assert tape.shape == shape and jnp.all(jnp.isfinite(fresh))
+    np.testing.assert_array_equal(carried, fresh)
+    with pytest.raises(ValueError, match="tape_shape"):
+        coefficients(y0s, tape=jnp.zeros((shape[0] - 1, shape[1])))
 
 
 @pytest.fixture(scope="module")

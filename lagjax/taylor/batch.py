@@ -24,7 +24,8 @@ writes the batch loop directly instead, as heyoka's batch mode does:
   over 32 lanes leaves the device idle (double pendulum ×10⁴ to t = 10 at 1e-12
   on an H200: tiles of 32, 631 members/s; the whole batch, 7.4e4/s);
 - the coefficients by the scalar graph on a tape (`tape`): per order, the inner
-  Cauchy sums of every operation, then O(1) per operation.
+  Cauchy sums of every operation, then O(1) per operation. A tile's loop
+  carries its tape from step to step, so no step zeroes a fresh one.
 
 The cost per step is that of one trajectory with every scalar replaced by a
 vector of the tile, so per member it falls with the tile until the vector unit
@@ -54,6 +55,7 @@ from .integrate import (
     two_sum,
 )
 from .step import horner, step_size
+from .tape import supports, tape_shape
 
 # Members per tile on a CPU: the tape of a tile stays in cache (module docstring).
 CPU_TILE = 32
@@ -73,6 +75,7 @@ class _Carry(NamedTuple):
     num_steps: jax.Array  # (B,)
     result: RESULTS  # (B,)
     count: jax.Array  # loop iterations, for max_steps
+    tape: jax.Array | None  # the coefficients' work buffer, reused by every step
 
 
 def _where(pred: jax.Array, a: Any, b: Any) -> Any:
@@ -213,15 +216,22 @@ def taylor_integrate_batch(
     )
     graph, _ = lower_vector_field(vector_field, t0[0], y0s[0], one_args, scalar=scalar)
     saver = _masked_saver if saves <= SMALL_SAVES else _loop_saver
+    uses_tape = not unroll and supports(graph)
 
     def run_tile(t0, t1, ts, y0, leaves):
         direction = jnp.where(t1 >= t0, 1.0, -1.0).astype(dtype)
         save = saver(ts, direction)
 
+        def coefficients(c: _Carry) -> tuple[jax.Array, jax.Array | None]:
+            """The step's coefficients, and the tape to carry (None without one)."""
+            run = lambda **tape: graph_coefficients(
+                graph, c.t, c.y, leaves, p, unroll=unroll, batched_leaves=leaf_flags,
+                **tape,
+            )  # fmt: skip
+            return (run(), None) if c.tape is None else run(tape=c.tape)
+
         def body(c: _Carry) -> _Carry:
-            coeffs = graph_coefficients(
-                graph, c.t, c.y, leaves, p, unroll=unroll, batched_leaves=leaf_flags
-            )
+            coeffs, tape = coefficients(c)
             h = step_size(coeffs, rtol, atol)
             active = (c.t != t1) & (c.result == RESULTS.successful)
             remaining = direction * ((t1 - c.t) - c.t_low)
@@ -243,6 +253,7 @@ def taylor_integrate_batch(
                 num_steps=c.num_steps + ok,
                 result=_where(active & ~finite, RESULTS.non_finite, c.result),
                 count=c.count + 1,
+                tape=tape,
             )
 
         def cond(c: _Carry) -> jax.Array:
@@ -262,6 +273,10 @@ def taylor_integrate_batch(
                 jnp.ones(width, bool), RESULTS.successful, RESULTS.successful
             ),
             count=jnp.array(0),
+            # Carried, not made afresh per step: a new tape is zeroed each time (`tape`).
+            tape=jnp.empty(tape_shape(graph, p, (width,)), dtype)
+            if uses_tape
+            else None,
         )
         final = jax.lax.while_loop(cond, body, init)
         result = _where(

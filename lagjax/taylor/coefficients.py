@@ -193,12 +193,15 @@ def graph_coefficients(
     *,
     unroll: bool = True,
     batched_leaves: tuple[bool, ...] | None = None,
-) -> jax.Array:
+    tape: jax.Array | None = None,
+) -> Any:
     """y₀..y_order, shape (order + 1, *y0.shape), from a lowered graph.
 
     With `batched_leaves` (one flag per leaf of args), the run is a batch: t0 has
     shape (B,), y0 shape (n, B), a batched leaf a trailing axis B; the result has
-    shape (order + 1, n, B).
+    shape (order + 1, n, B). With `tape` (a loop's carried buffer, `tape.tape_shape`;
+    only where the tape runs: `unroll=False` and `tape.supports(graph)`), the
+    result is (coefficients, tape).
     """
     y0 = jnp.asarray(y0)
     t0 = jnp.asarray(t0, dtype=y0.dtype)
@@ -212,7 +215,11 @@ def graph_coefficients(
     values = _order_zero(graph, inputs, batch)
     if not unroll and supports(graph):
         shape = () if batch is None else (batch.members,)
-        return tape_coefficients(graph, values, order, shape, y0.dtype)
+        return tape_coefficients(graph, values, order, shape, y0.dtype, tape)
+    if tape is not None:
+        raise ValueError(
+            "lagjax.taylor: a tape was given for a graph the tape cannot run"
+        )
     series = {}
     for i in graph.series:
         if i in values:

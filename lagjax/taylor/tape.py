@@ -194,22 +194,50 @@ def _linear(rule: Any, now: list, zi: list, zo: list) -> tuple:
     return (jnp.where(first, now[0], now[1]),)
 
 
+def tape_shape(graph: Graph, order: int, shape: tuple) -> tuple[int, int]:
+    """The tape's shape for `graph` at `order` with values of shape `shape`:
+    (order + 1, slots × width)."""
+    return (order + 1, len(_layout(graph).slots) * math.prod(shape))
+
+
 def tape_coefficients(
-    graph: Graph, values: dict, order: int, shape: tuple, dtype: Any
-) -> jax.Array:
+    graph: Graph,
+    values: dict,
+    order: int,
+    shape: tuple,
+    dtype: Any,
+    tape: jax.Array | None = None,
+) -> Any:
     """y₀..y_order, shape (order + 1, n, *shape), of a scalar graph whose order-0
     values (every input and operation, each of shape `shape`: () or (B,)) are
     `values`. The tape is (order + 1, slots × width), width = B (1 for one
     trajectory): row j holds the slots' j-th coefficients, one slot after
     another, so an order is one contiguous write and the sums read contiguous
-    slabs; the last row is zeros."""
+    slabs.
+
+    `tape`: the buffer to work in (shape `tape_shape`), e.g. the previous step's;
+    the result is then (coefficients, tape). Its contents do not matter: every
+    row an order reads was written earlier in the same call (row 0 first). A
+    loop of steps that carries it spares a fresh, zeroed tape per step (double
+    pendulum ×1024 to t = 10 at tol 1e-12, tiles of 32: XLA wrote 155 kB of
+    zeros per step with `memset`, 7 % of the run; carried, 0.92× the time,
+    interleaved in one run, core 1)."""
     layout = _layout(graph)
     terms, width = len(layout.weighted), math.prod(shape)
     full = lambda x: jnp.broadcast_to(x, shape)
     real = lambda x: full(jnp.asarray(x, dtype))
     flat_row = lambda xs: jnp.concatenate([jnp.ravel(x) for x in xs])
     zero_row = flat_row([real(values[v]) for v in layout.slots])
-    tape = jnp.zeros((order + 1, zero_row.shape[0]), dtype).at[0].set(zero_row)
+    given = tape is not None
+    if tape is None:
+        tape = jnp.zeros(tape_shape(graph, order, shape), dtype)
+    elif tape.shape != tape_shape(graph, order, shape) or tape.dtype != dtype:
+        raise ValueError(
+            f"lagjax.taylor: the tape given has shape {tape.shape} {tape.dtype}; "
+            f"this graph at order {order} needs {tape_shape(graph, order, shape)} "
+            f"{jnp.dtype(dtype)} (tape_shape)"
+        )
+    start = tape.at[0].set(zero_row)
 
     def one_order(k: Any, tape: jax.Array) -> jax.Array:
         sums = _inner_sums(tape, k, layout, order, width).reshape((terms, *shape))
@@ -240,9 +268,10 @@ def tape_coefficients(
         row = flat_row(row)
         return jax.lax.dynamic_update_index_in_dim(tape, row, k, axis=0)
 
-    tape = jax.lax.fori_loop(1, max(order, 1), one_order, tape)
+    filled = jax.lax.fori_loop(1, max(order, 1), one_order, start)
     state = jnp.stack([real(values[y]) for y in graph.state])
     divisors = np.arange(1, order + 1).reshape((-1,) + (1,) * (1 + len(shape)))
     # y_k = f_{k−1}/k for k = 1..order, from the rates' rows 0..order−1.
-    rates = tape[:order, 2 * terms * width :].reshape((order, -1, *shape))
-    return jnp.concatenate([state[None], rates / divisors.astype(dtype)])
+    rates = filled[:order, 2 * terms * width :].reshape((order, -1, *shape))
+    coefficients = jnp.concatenate([state[None], rates / divisors.astype(dtype)])
+    return (coefficients, filled) if given else coefficients
