@@ -94,6 +94,18 @@ def runs_for(e: float, ts: np.ndarray) -> dict[str, Callable | None]:
     }
 
 
+def trend(q: np.ndarray, p: np.ndarray) -> dict:
+    """The largest relative energy error over the first and the last fifth of the
+    saves: a secular trend shows as a last fifth well above the first."""
+    energy = 0.5 * np.sum(p**2, -1) - 1 / np.linalg.norm(q, axis=-1)
+    error = np.abs(energy / -0.5 - 1)
+    fifth = max(1, error.size // 5)
+    return dict(
+        energy_first_fifth=float(np.max(error[1 : fifth + 1])),
+        energy_last_fifth=float(np.max(error[-fifth:])),
+    )
+
+
 def rows_for(e: float, periods: int, repeats: int) -> list[dict]:
     ts = np.linspace(0, periods * PERIOD, 101)
     runs = {name: run for name, run in runs_for(e, ts).items() if run is not None}
@@ -115,11 +127,13 @@ def rows_for(e: float, periods: int, repeats: int) -> list[dict]:
         row = dict(e=e, periods=periods, method=name, first_s=firsts[name],
                    run_s=warm, ratio_to_heyoka_long_double=warm / reference)  # fmt: skip
         row.update(measures(*results[name], ts, e))
+        row.update(trend(*results[name]))
         rows.append(row)
         print(f"e={e:<6} {name:36s} {warm * 1e3:8.1f} ms ({warm / reference:5.2f}x "
-              f"heyoka ld)  energy {row['energy']:.1e}  pericentre "
-              f"{row['pericentre_drift']:.1e} rad  position {row['position']:.1e}"
-              f"  (first {firsts[name]:.1f} s)", flush=True)  # fmt: skip
+              f"heyoka ld)  energy {row['energy']:.1e} (first / last fifth "
+              f"{row['energy_first_fifth']:.1e} / {row['energy_last_fifth']:.1e})  "
+              f"pericentre {row['pericentre_drift']:.1e} rad  position "
+              f"{row['position']:.1e}  (first {firsts[name]:.1f} s)", flush=True)  # fmt: skip
     return rows
 
 
