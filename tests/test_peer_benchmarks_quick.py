@@ -57,6 +57,24 @@ def test_time_transformed_keeps_kepler(tmp_path):
     assert not extreme or min(extreme) < 1e-10, extreme
 
 
+def test_double_double_keeps_kepler_at_the_pericentre(tmp_path):
+    """e = 0.99, 100 periods, saves at the pericentre: the double-double rows
+    reach the float64 rounding of the saved state, below the float64 run's
+    round-off walk, with no trend between the first and last fifth."""
+    out = tmp_path / "kdd.json"
+    run_module("kepler_double_double", "--json", str(out))
+    rows = {row["method"]: row for row in json.loads(out.read_text())["rows"]}
+    double = rows["TT(Yoshida4) ds=0.05"]
+    for name in (
+        "TT(Yoshida4) double-double ds=0.05",
+        "TT(KahanLi8) double-double ds=0.1",
+    ):
+        row = rows[name]
+        assert row["energy"] < 1.5e-13 < double["energy"], row
+        assert row["energy_last_fifth"] <= 2 * row["energy_first_fifth"], row
+        assert row["pericentre_drift"] < 1e-12, row
+
+
 @pytest.mark.parametrize("name", ["adjoints", "taylor"])
 def test_the_script_runs(name):
     run_module(name)
