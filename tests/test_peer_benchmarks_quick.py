@@ -75,6 +75,20 @@ def test_double_double_keeps_kepler_at_the_pericentre(tmp_path):
         assert row["pericentre_drift"] < 1e-12, row
 
 
+def test_the_chain_keeps_the_pythagorean_energy(tmp_path):
+    """To t = 30 in chain coordinates: energy to 1e-12, momentum and angular
+    momentum kept, and (where REBOUND is installed) IAS15's state at t = 30."""
+    out = tmp_path / "chain.json"
+    run_module("pythagorean_chain", "--json", str(out))
+    rows = [r for r in json.loads(out.read_text())["rows"] if "chain" in r["method"]]
+    assert rows
+    for row in rows:
+        assert row["energy"] < 1e-12, row
+        assert row["momentum"] < 1e-12 and row["angular_momentum"] < 1e-11, row
+        if "ias15_difference_at_30" in row:
+            assert row["ias15_difference_at_30"] < 1e-6, row
+
+
 @pytest.mark.parametrize("name", ["adjoints", "taylor"])
 def test_the_script_runs(name):
     run_module(name)
