@@ -51,6 +51,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .vector_sincos import sin_cos
+
 
 def _window(b: jax.Array, k: Any) -> jax.Array:
     """wⱼ = bₖ₋ⱼ for j = 0..P-1 (zero for j > k), for a traced k."""
@@ -256,7 +258,8 @@ class SinCos(AbstractRule):
     series: tuple[bool, ...] = eqx.field(static=True)
 
     def zero(self, a):
-        return (jnp.sin(a), jnp.cos(a))
+        # Not jnp.sin/jnp.cos: on a CPU those are a libm call per element.
+        return sin_cos(a)
 
     def coefficient(self, k, inputs, outputs):
         (a,), (s, c) = inputs, outputs
