@@ -360,13 +360,13 @@ def extrapolation_runs(scene, ts: np.ndarray) -> dict[str, Callable | None]:
     return rows
 
 
-def interleaved(chosen: dict[str, Callable], rounds: int) -> dict[str, tuple]:
-    """(first call s, fastest of `rounds` later calls s) per row, the rows run in
-    turn in every round."""
-    first = {}
+def interleaved(chosen: dict, rounds: int) -> dict:
+    """(first call s, fastest of `rounds` later calls s, the first call's result)
+    per row, the rows run in turn in every round."""
+    first, results = {}, {}
     for name, run in chosen.items():
         start = time.perf_counter()
-        run()
+        results[name] = run()
         first[name] = time.perf_counter() - start
     best = dict.fromkeys(chosen, np.inf)
     for _ in range(rounds):
@@ -374,7 +374,7 @@ def interleaved(chosen: dict[str, Callable], rounds: int) -> dict[str, tuple]:
             start = time.perf_counter()
             run()
             best[name] = min(best[name], time.perf_counter() - start)
-    return {name: (first[name], best[name]) for name in chosen}
+    return {name: (first[name], best[name], results[name]) for name in chosen}
 
 
 def work_per_step(rows: list[dict], substeps: tuple[int, ...] = (1, 2, 4, 8)) -> None:
@@ -450,7 +450,7 @@ def main() -> None:
     warm_times = interleaved(chosen, ROUNDS) if options.extrapolation else {}
     for name, run in chosen.items():
         if name in warm_times:
-            (q, p), (first, warm) = run(), warm_times[name]
+            first, warm, (q, p) = warm_times[name]
         else:
             q, p, first, warm = timed(run, 1 if options.quick else 5)
         if name == "REBOUND IAS15":

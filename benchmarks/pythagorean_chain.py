@@ -77,7 +77,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import time
 from collections.abc import Callable
 from types import SimpleNamespace
 
@@ -85,7 +84,12 @@ import jax
 import numpy as np
 
 import lagjax as lj
-from benchmarks.close_encounters import heyoka_run, measures, rebound_run
+from benchmarks.close_encounters import (
+    heyoka_run,
+    interleaved,
+    measures,
+    rebound_run,
+)
 from benchmarks.pythagorean_jacobi import jacobi_run
 from lagjax.scenes.pythagorean import PythagoreanThreeBody
 
@@ -177,22 +181,6 @@ def rows_to_time(scene, ts: np.ndarray, shifts, tolerances) -> dict:
         scene, ts, solver, FIRST_STEP, True
     )
     return rows
-
-
-def interleaved(rows: dict, rounds: int) -> dict:
-    """{key: (first call s, fastest later call s, (q, p))}, rows in turn."""
-    first, results = {}, {}
-    for key, run in rows.items():
-        start = time.perf_counter()
-        results[key] = run()
-        first[key] = time.perf_counter() - start
-    best = dict.fromkeys(rows, np.inf)
-    for _ in range(rounds):
-        for key, run in rows.items():
-            start = time.perf_counter()
-            run()
-            best[key] = min(best[key], time.perf_counter() - start)
-    return {key: (first[key], best[key], results[key]) for key in rows}
 
 
 def report(scene, rows: dict, timings: dict) -> list[dict]:
