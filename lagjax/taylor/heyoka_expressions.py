@@ -56,9 +56,9 @@ from lagjax.taylor.heyoka_rules import (
     UnsupportedPrimitiveError,
     as_expression,
     element_map,
-    elementwise_rules,
     symbolic,
 )
+from lagjax.taylor.heyoka_signs import folding_rules
 
 # Calls whose inner jaxpr is evaluated in place, and the parameter that holds it.
 INNER_JAXPR = {
@@ -194,11 +194,12 @@ def _objects(elements: Sequence[Any], shape: Sequence[int]) -> np.ndarray:
 
 
 class _Walk:
-    """One translation: heyoka, and the poisoned branches met so far."""
+    """One translation: heyoka, its element rules (negations folded as they
+    are met, `heyoka_signs`), and the poisoned branches met so far."""
 
     def __init__(self, hy: Any) -> None:
         self.hy = hy
-        self.elementwise = elementwise_rules(hy)
+        self.elementwise = folding_rules(hy)
         self.poisoned: list[str] = []
 
     def evaluate(self, jaxpr: Any, consts: Sequence[Any], inputs: Sequence[Any]):

@@ -49,6 +49,7 @@ class Walk(Protocol):
 
     hy: Any
     poisoned: list[str]
+    elementwise: dict[str, Callable[..., Any]]
 
     def evaluate(
         self, jaxpr: Any, consts: Sequence[Any], inputs: Sequence[Any]
@@ -200,7 +201,8 @@ def _convert(walk: Walk, eqn: Any, operands: list[Any]) -> list[Any]:
 
 
 def _dot_general(walk: Walk, eqn: Any, operands: list[Any]) -> list[Any]:
-    """Sums of products, terms with a numeric zero factor left out."""
+    """Sums of products, terms with a numeric zero factor left out; products and
+    two-term sums by the walk's element rules (which fold negations)."""
     (lc, rc), (lb, rb) = eqn.params["dimension_numbers"]
     lhs, rhs = (np.asarray(x, dtype=object) for x in operands)
     lf = [d for d in range(lhs.ndim) if d not in lc and d not in lb]
@@ -211,17 +213,21 @@ def _dot_general(walk: Walk, eqn: Any, operands: list[Any]) -> list[Any]:
     a = lhs.transpose([*lb, *lf, *lc]).reshape(int(np.prod(batch)), -1, k)
     b = rhs.transpose([*rb, *rc, *rf]).reshape(int(np.prod(batch)), k, -1)
     out = np.empty((a.shape[0], a.shape[1], b.shape[2]), dtype=object)
+    mul, add = walk.elementwise["mul"], walk.elementwise["add"]
     for index in np.ndindex(*out.shape):
         i, m, n = index
-        out[index] = _sum(
-            walk.hy,
-            [
-                x * y
-                for x, y in zip(a[i, m], b[i, :, n])
-                if not (_is_zero(x) or _is_zero(y))
-            ],
-        )
+        terms = [
+            mul(x, y) if _symbolic_element(walk.hy, x, y) else x * y
+            for x, y in zip(a[i, m], b[i, :, n])
+            if not (_is_zero(x) or _is_zero(y))
+        ]
+        both = len(terms) == 2 and _symbolic_element(walk.hy, *terms)
+        out[index] = add(*terms) if both else _sum(walk.hy, terms)
     return [out.reshape(shape)]
+
+
+def _symbolic_element(hy: Any, *elements: Any) -> bool:
+    return any(isinstance(e, hy.expression) for e in elements)
 
 
 def _is_zero(element: Any) -> bool:
@@ -240,8 +246,7 @@ def _reduction(combine: str) -> Callable[[Walk, Any, list[Any]], list[Any]]:
     """reduce_sum / reduce_max / reduce_min / reduce_prod over `axes`."""
 
     def rule(walk: Walk, eqn: Any, operands: list[Any]) -> list[Any]:
-        fold = elementwise_rules(walk.hy)[combine]
-        ufunc = np.frompyfunc(fold, 2, 1)
+        ufunc = np.frompyfunc(walk.elementwise[combine], 2, 1)
         x = np.asarray(operands[0], dtype=object)
         for axis in sorted(eqn.params["axes"], reverse=True):
             x = (
@@ -264,7 +269,7 @@ def _cumulative(combine: str) -> Callable[[Walk, Any, list[Any]], list[Any]]:
     """cumsum / cumprod / cummax / cummin along `axis`, maybe reversed."""
 
     def rule(walk: Walk, eqn: Any, operands: list[Any]) -> list[Any]:
-        ufunc = np.frompyfunc(elementwise_rules(walk.hy)[combine], 2, 1)
+        ufunc = np.frompyfunc(walk.elementwise[combine], 2, 1)
         axis, reverse = eqn.params["axis"], eqn.params["reverse"]
         x = np.asarray(operands[0], dtype=object)
         x = np.flip(x, axis) if reverse else x
