@@ -15,6 +15,7 @@ pytest.importorskip("heyoka")
 
 from lagjax._integrate.taylor_batch import run_taylor_batch
 from lagjax.taylor import heyoka_runs
+from lagjax.taylor.heyoka_cache import translated
 
 HEYOKA = lj.Taylor(backend="heyoka", rtol=1e-15, atol=1e-15)
 AMPLITUDES = jnp.linspace(0.2, 2.0, 6)  # not a multiple of the SIMD width
@@ -67,6 +68,31 @@ def test_jit_of_vmap_over_args_equals_single_runs(batches):
 def test_jit_of_one_run_equals_the_direct_run():
     jitted = jax.jit(final_angle)(jnp.asarray(0.7))
     assert jitted == pytest.approx(float(final_angle(0.7)), abs=1e-15)
+
+
+def test_one_member_to_its_end_equals_the_batch_path(batches):
+    """One member under `jit` (no `vmap`) runs straight to t1
+    (`HeyokaRunner.one_to_end`, no batch bookkeeping): the batch path's rows,
+    bit for bit, and its refusal of NaN or unordered times."""
+    jitted = jax.jit(final_angle)(jnp.asarray(0.7))
+    assert batches == []  # the runner's batch call was not needed
+    assert float(jitted) == float(final_angle(0.7))
+
+    def field(t, y, args):
+        return jnp.stack([y[1], -args["g"] * jnp.sin(y[0])])
+
+    runner = heyoka_runs.HeyokaRunner(translated(field, 2, G), 1e-15, 10_000)
+    y0, pars = np.array([0.7, 0.0]), np.array([9.81])
+    for t0, t1, ts in ((0.0, 2.0, [2.0]), (0.0, np.nan, [np.nan]),
+                       (2.0, -1.0, [-1.0]), (0.0, 2.0, [3.0])):  # fmt: skip
+        one = runner.one_to_end(y0, pars, t0, t1, np.array(ts))
+        rows = heyoka_runs.HeyokaRunner.__call__(
+            runner, y0[None], pars[None], np.array([t0]), np.array([t1]),
+            np.array([ts]),
+        )  # fmt: skip
+        assert one is not None
+        for got, want in zip(one, rows):
+            np.testing.assert_array_equal(got, want[0])
 
 
 def test_gradients_are_refused_by_name():

@@ -51,6 +51,9 @@ def heyoka_member_run(
     inputs = (y0, pars, t0, t1, ts)
     if any(isinstance(x, Tracer) for x in inputs):
         return Rows(*_traced_run(runner, *inputs))
+    one = runner.one_to_end(*inputs)
+    if one is not None:
+        return one
     rows = runner(*(np.asarray(x)[None] for x in inputs))
     return Rows(*(np.asarray(x[0]) for x in rows))
 
@@ -86,6 +89,10 @@ def _batched_callback(runner: HeyokaRunner, y0, pars, t0, t1, ts):
     "broadcast_all") flattened into one batch for heyoka, and restored."""
     y0 = np.asarray(y0)
     lead = y0.shape[:-1]
+    dtypes = (y0.dtype, y0.dtype, np.int32, np.int32)
+    one = None if lead else runner.one_to_end(y0, pars, t0, t1, ts)
+    if one is not None:  # one member under `jit`, no `vmap`: no batch bookkeeping
+        return tuple(np.asarray(x, dtype) for x, dtype in zip(one, dtypes))
     count = int(np.prod(lead))
 
     def members(x: Any, rank: int) -> np.ndarray:
@@ -96,7 +103,6 @@ def _batched_callback(runner: HeyokaRunner, y0, pars, t0, t1, ts):
         members(y0, 1), members(pars, 1), members(t0, 0), members(t1, 0),
         members(ts, 1),
     )  # fmt: skip
-    dtypes = (y0.dtype, y0.dtype, np.int32, np.int32)
     return tuple(
         np.asarray(x, dtype).reshape((*lead, *x.shape[1:]))
         for x, dtype in zip(rows, dtypes)
