@@ -177,13 +177,21 @@ def _one_field_per_system(system: AbstractSystem, layout: tuple) -> FlatVectorFi
     return field
 
 
+def _dtype_name(x: Any) -> str:
+    """The dtype's name of an array, a tracer or a Python number (NumPy 2.4
+    deprecates `np.result_type` of an array-like)."""
+    if isinstance(x, (np.ndarray, np.generic, jax.Array)):
+        return np.dtype(x.dtype).name
+    return np.result_type(x).name
+
+
 def flat_vector_field(system: AbstractSystem, y0: Any):
     """`(field, flat0, unravel)` for the state `y0` of `system`."""
     leaves, treedef = jax.tree_util.tree_flatten(tuple(y0))
     layout = (
         treedef,
         tuple(np.shape(x) for x in leaves),
-        tuple(np.result_type(x).name for x in leaves),
+        tuple(_dtype_name(x) for x in leaves),
     )
     field = _one_field_per_system(system, layout)
     if all(isinstance(x, np.ndarray) for x in leaves):  # heyoka's route: no JAX op
