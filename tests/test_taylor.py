@@ -11,7 +11,7 @@ from jax.experimental import jet
 
 import lagjax as lj
 from lagjax.taylor import RESULTS, Taylor, taylor_coefficients, taylor_integrate
-from lagjax.taylor.step import horner, order_from_tolerance
+from lagjax.taylor.step import compensated_advance, horner, order_from_tolerance
 from tests.helpers import lie_coefficients
 
 G = 9.81
@@ -147,6 +147,19 @@ def _fixed_steps(f, y0, h, n, order):
         return horner(taylor_coefficients(f, 0.0, y, order=order, unroll=False), h)
 
     return jax.lax.fori_loop(0, n, body, y0)
+
+
+def test_compensated_advance_keeps_increments_below_the_last_bit():
+    """A thousand increments of 1e-17 on y = 1 (each below half an ulp): a plain
+    sum keeps 1.0; the compensated state ends at 1 + 1e-14 to round-off."""
+    y, y_low = jnp.ones(1), jnp.zeros(1)
+    for _ in range(1000):
+        coeffs = jnp.stack([y, jnp.full(1, 1e-17)])
+        assert float(horner(coeffs, 1.0)[0]) == float(y[0])  # plain: lost
+        y, y_low = compensated_advance(coeffs, jnp.asarray(1.0), y_low)
+    total = np.longdouble(float(y[0])) + np.longdouble(float(y_low[0]))
+    assert abs(float(total - (1 + np.longdouble(1e-14)))) < 1e-27
+    assert abs(float(y[0]) - (1 + 1e-14)) <= 2.3e-16  # the high part moved too
 
 
 def test_order_of_the_method_on_the_pendulum():

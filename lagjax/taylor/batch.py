@@ -52,9 +52,8 @@ from .integrate import (
     SMALL_SAVES,
     TaylorSolution,
     resolve_order,
-    two_sum,
 )
-from .step import horner, step_size
+from .step import compensated_advance, horner, step_size, two_sum
 from .tape import supports, tape_shape
 
 # Members per tile on a CPU: the tape of a tile stays in cache (module docstring).
@@ -70,6 +69,7 @@ class _Carry(NamedTuple):
     t: jax.Array  # (B,)
     t_low: jax.Array  # (B,): t + t_low is the time in double-length arithmetic
     y: jax.Array  # (n, B)
+    y_low: jax.Array  # (n, B): y + y_low, compensated summation
     ys: jax.Array  # (S, n, B)
     index: jax.Array  # (B,): the next save time to fill (inner-loop saving)
     num_steps: jax.Array  # (B,)
@@ -240,7 +240,7 @@ def taylor_integrate_batch(
             t_sum, t_err = two_sum(c.t, tau)
             t_high, t_low = two_sum(t_sum, c.t_low + t_err)
             t_new = jnp.where(last, t1, t_high)
-            y_new = horner(coeffs, tau)
+            y_new, y_low = compensated_advance(coeffs, tau, c.y_low)
             finite = jnp.all(jnp.isfinite(y_new), axis=0)
             ok = active & finite
             ys, index = save(coeffs, c.t, c.t_low, t_new, c.ys, c.index, ok)
@@ -248,6 +248,7 @@ def taylor_integrate_batch(
                 t=jnp.where(ok, t_new, c.t),
                 t_low=jnp.where(ok, jnp.where(last, 0.0, t_low), c.t_low),
                 y=jnp.where(ok, y_new, c.y),
+                y_low=jnp.where(ok, y_low, c.y_low),
                 ys=ys,
                 index=index,
                 num_steps=c.num_steps + ok,
@@ -266,6 +267,7 @@ def taylor_integrate_batch(
             t=t0,
             t_low=jnp.zeros_like(t0),
             y=y0,
+            y_low=jnp.zeros_like(y0),
             ys=jnp.where(at_start[:, None, :], y0, jnp.nan),
             index=jnp.sum(at_start, axis=0),
             num_steps=jnp.zeros(width, int),

@@ -46,7 +46,14 @@ import jax.numpy as jnp
 from .coefficients import graph_coefficients, lower_vector_field
 from .dense import DenseBuffer, TaylorDense, empty_buffer, keep_step
 from .events import StepEvent, Watch, first_crossing, start_watch, watch_step
-from .step import horner, horner_many, order_from_tolerance, step_size
+from .step import (
+    compensated_advance,
+    horner,
+    horner_many,
+    order_from_tolerance,
+    step_size,
+    two_sum,
+)
 
 # Up to this many save times, every step fills them by one masked evaluation
 # (reverse-mode differentiable); beyond, an inner loop visits only those inside
@@ -85,6 +92,7 @@ class _Carry(NamedTuple):
     t: jax.Array
     t_low: jax.Array  # t + t_low is the time in double-length arithmetic
     y: jax.Array
+    y_low: jax.Array  # y + y_low: the state with compensated summation
     ys: jax.Array
     index: jax.Array  # the next save time to fill (inner-loop saving)
     num_steps: jax.Array
@@ -119,13 +127,6 @@ def resolve_order(rtol: Any, atol: Any, order: int | None) -> int:
             "array shapes, so it must be known when tracing)"
         )
     return order_from_tolerance(min(t for t in tolerances if t is not None))
-
-
-def two_sum(a: jax.Array, b: jax.Array) -> tuple[jax.Array, jax.Array]:
-    """s + e = a + b exactly, s = fl(a + b) (Knuth's TwoSum)."""
-    s = a + b
-    b_virtual = s - a
-    return s, (a - (s - b_virtual)) + (b - b_virtual)
 
 
 def _saver(ts: jax.Array, direction: jax.Array) -> Callable:
@@ -207,7 +208,7 @@ def taylor_integrate(
         coeffs = graph_coefficients(graph, c.t, c.y, leaves, p, unroll=unroll)
         h = jax.lax.stop_gradient(step_size(coeffs, rtol, atol))
         tau, t_new, t_low, last = _advance_time(c.t, c.t_low, h, t1, direction)
-        y_new = horner(coeffs, tau)
+        y_new, y_low = compensated_advance(coeffs, tau, c.y_low)
         ok = jnp.all(jnp.isfinite(y_new))
         ys, index = save(coeffs, c.t, c.t_low, t_new, c.ys, c.index, ok)
         keep = lambda new, old: jnp.where(ok, new, old)
@@ -215,6 +216,7 @@ def taylor_integrate(
             t=keep(t_new, c.t),
             t_low=keep(jnp.where(last, 0.0, t_low), c.t_low),
             y=keep(y_new, c.y),
+            y_low=keep(y_low, c.y_low),
             ys=ys,
             index=index,
             num_steps=c.num_steps + ok,
@@ -235,6 +237,7 @@ def taylor_integrate(
         t=t0,
         t_low=jnp.zeros_like(t0),
         y=y0,
+        y_low=jnp.zeros_like(y0),
         **_saves_at_start(ts, t0, y0, direction),
         num_steps=jnp.array(0),
         result=RESULTS.successful,  # pyright: ignore[reportArgumentType]
