@@ -89,6 +89,20 @@ def test_the_chain_keeps_the_pythagorean_energy(tmp_path):
             assert row["ias15_difference_at_30"] < 1e-6, row
 
 
+def test_the_frontier_finds_both_sides_at_the_target(tmp_path):
+    """Every Taylor setting lands within its tolerance's reach of the long-double
+    reference, and each side has a setting at the target error."""
+    pytest.importorskip("heyoka")
+    out = tmp_path / "frontier.json"
+    run_module("taylor_frontier", "--json", str(out))
+    for case in json.loads(out.read_text()):
+        assert case["reference"].startswith("heyoka long double"), case["reference"]
+        for row in case["rows"]:
+            assert row["error"] < 100 * row["tol"], row
+        for best in case["best"].values():
+            assert best["heyoka"] and best["lagjax"] and best["ratio"] > 0, best
+
+
 @pytest.mark.parametrize("name", ["adjoints", "taylor"])
 def test_the_script_runs(name):
     run_module(name)
