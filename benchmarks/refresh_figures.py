@@ -2,12 +2,14 @@
 
     python -m benchmarks.refresh_figures [--measure wp|scaling ...] [--out DIR]
 
-Without `--measure`, nothing is run: the five figures are drawn from the data
+Without `--measure`, nothing is run: the six figures are drawn from the data
 files beside them, in the colours of `benchmarks.palette` —
 
 - `wp_kepler.png`, `wp_double_pendulum.png`, `wp_henon_heiles.png` from
   `work_precision.json` (the full sweeps of `work_precision.py` on those scenes);
 - `scaling.png` from `scaling.json` (the size and batch studies of `scaling.py`);
+- `taylor_frontier.png` from `taylor_frontier.json` (`taylor_frontier.py`'s full
+  run: lagjax's Taylor route and heyoka, every setting's error against time);
 - `rigid_long_horizon.png` from the "Every point" table of `rigid_long_horizon.md`
   (written by `rigid_long_horizon.py`; run times to three digits).
 
@@ -103,6 +105,11 @@ def draw(out: Path) -> None:
         sizes = json.loads((out / "scaling.json").read_text())
         caption = _caption(sizes["meta"])
         scaling.plot(out, sizes["scaling"], sizes["throughput"], caption)
+    if (out / "taylor_frontier.json").exists():
+        from benchmarks import taylor_frontier
+
+        results = json.loads((out / "taylor_frontier.json").read_text())
+        taylor_frontier.draw(results, str(out / "taylor_frontier.png"))
     if (out / "rigid_long_horizon.md").exists():
         report = (out / "rigid_long_horizon.md").read_text()
         records = rigid_long_horizon_report.records_from_markdown(report)

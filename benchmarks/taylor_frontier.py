@@ -275,7 +275,8 @@ def draw(results: list[dict], path: str) -> None:
         for target in result["best"]:
             ax.axhline(target, color="grey", lw=0.8, ls=":")
         ax.set_xlabel("run time, ms (CPU time, one core)")
-        ax.set_ylabel("max error of the final state")
+        spread = "largest member" if result["members"] else "median of 9 starts"
+        ax.set_ylabel(f"error of the final state ({spread})")
         ax.set_title(f"double pendulum, {result['case']}, t = {result['t1']:g}")
         ax.legend()
     fig.tight_layout()
