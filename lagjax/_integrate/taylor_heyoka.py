@@ -262,7 +262,7 @@ def _condition(fn: Any, field: Any, n: int, example: Any) -> Any:
     def on_flat_state(t, y, args):
         return jnp.asarray(fn(t, field.unravel(y), args))
 
-    elements, shape, dtype, _ = translate_function(on_flat_state, n, example)
+    elements, shape, dtype, *_ = translate_function(on_flat_state, n, example)
     if shape != () or not jnp.issubdtype(dtype, jnp.floating):
         raise ValueError(
             "lj.Taylor(backend='heyoka') locates an event where a real-valued "

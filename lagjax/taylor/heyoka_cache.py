@@ -8,9 +8,11 @@ span or `args` reuses them.
 - A translation is keyed by the function and the signature of `args` (like
   `jax.jit`, a function is traced once per signature: a changed closure is not
   seen; pass what changes in `args`).
-- An integrator is keyed by the expressions themselves (a function traced anew
-  to the same equations reuses the compilation), the tolerance, the batch width,
-  the precision, compact mode and the terminal events it watches.
+- An integrator is keyed by the equations — the same expression objects, or
+  those read from the same jaxpr (a function traced anew to the same jaxpr
+  reuses the compilation; `heyoka_expressions._Equations`, which never compares
+  by heyoka's `==`) —, the tolerance, the batch width, the precision, compact
+  mode and the terminal events it watches.
 
 References: F. Biscani & D. Izzo, "Revisiting high-order Taylor methods for
 astrodynamics and celestial mechanics", MNRAS 504 (2021) 2614 (heyoka's compact

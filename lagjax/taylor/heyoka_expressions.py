@@ -39,6 +39,7 @@ Taylor methods", Experimental Mathematics 14 (2005) 99; the JAX documentation,
 from __future__ import annotations
 
 import functools
+import hashlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -78,24 +79,33 @@ class HeyokaSystem:
     - `equations`: ((y_i, f_i), ...) as `heyoka.taylor_adaptive` takes them.
     - `num_pars`: how many scalars `args` holds (`heyoka.par[0 … num_pars-1]`).
     - `poisoned`: primitives of state-dependent `cond` branches replaced by NaN.
+    - `source`: a digest of the jaxpr the equations were read from (its text,
+      constants, state size and `args` signature; `jaxpr_digest`), or "".
     """
 
     equations: tuple[tuple[Any, Any], ...]
     num_pars: int
     poisoned: tuple[str, ...]
+    source: str = ""
 
     @functools.cached_property
     def key(self) -> _Equations:
         """The right-hand sides as a dictionary key, hashed once."""
-        return _Equations(tuple(rhs for _, rhs in self.equations), self.num_pars)
+        rhs = tuple(rhs for _, rhs in self.equations)
+        return _Equations(rhs, self.num_pars, self.source)
 
 
 class _Equations:
-    """Expressions compared by structure, their hash computed once (hashing a
-    heyoka expression walks its tree)."""
+    """Equations as a dictionary key: hashed once by heyoka's hash; equal when
+    they are the same expression objects, or read from the same jaxpr (equal
+    `source` digests: the translation is deterministic). Never by heyoka's `==`,
+    which walks an expression as a tree, not as the graph it is: two
+    translations of the 4-link pendulum's equations compared for minutes (each
+    shared subexpression walked once per path to it), and lj.simulate beside
+    heyoka_integrate on the 8-link chain never finished."""
 
-    def __init__(self, rhs: tuple[Any, ...], num_pars: int) -> None:
-        self.rhs, self.num_pars = rhs, num_pars
+    def __init__(self, rhs: tuple[Any, ...], num_pars: int, source: str) -> None:
+        self.rhs, self.num_pars, self.source = rhs, num_pars, source
         self.hash = hash((rhs, num_pars))
 
     def __hash__(self) -> int:
@@ -104,7 +114,11 @@ class _Equations:
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, _Equations):
             return NotImplemented
-        return (self.rhs, self.num_pars) == (other.rhs, other.num_pars)
+        if self.num_pars != other.num_pars or len(self.rhs) != len(other.rhs):
+            return False
+        if all(a is b for a, b in zip(self.rhs, other.rhs)):
+            return True
+        return bool(self.source) and self.source == other.source
 
 
 def import_heyoka() -> Any:
@@ -138,7 +152,9 @@ def jaxpr_to_heyoka(
     that heyoka's expression system cannot express.
     """
     hy = import_heyoka()
-    rhs, out_shape, _, poisoned = translate_function(vector_field, n, args_example)
+    rhs, out_shape, _, poisoned, source = translate_function(
+        vector_field, n, args_example
+    )
     if out_shape != (n,):
         raise ValueError(
             f"vector_field must return an array of shape ({n},) for a state of shape "
@@ -146,7 +162,7 @@ def jaxpr_to_heyoka(
         )
     states = state_variables(hy, n)
     num_pars = sum(int(np.size(x)) for x in jax.tree_util.tree_leaves(args_example))
-    return HeyokaSystem(tuple(zip(states, rhs)), num_pars, poisoned)
+    return HeyokaSystem(tuple(zip(states, rhs)), num_pars, poisoned, source)
 
 
 def state_variables(hy: Any, n: int) -> list[Any]:
@@ -156,10 +172,11 @@ def state_variables(hy: Any, n: int) -> list[Any]:
 
 def translate_function(
     fn: Callable[[Any, Any, Any], Any], n: int, args_example: Any = None
-) -> tuple[list[Any], tuple[int, ...], Any, tuple[str, ...]]:
+) -> tuple[list[Any], tuple[int, ...], Any, tuple[str, ...], str]:
     """`fn(t, y, args)` (one array output) as heyoka expressions in the state
     variables, `heyoka.time` and the parameters: (the output's elements as
-    expressions, its shape, its dtype, the poisoned primitives met)."""
+    expressions, its shape, its dtype, the poisoned primitives met, the digest
+    of its jaxpr, `jaxpr_digest`)."""
     hy = import_heyoka()
     closed = jax.make_jaxpr(fn)(
         jnp.zeros((), float), jnp.zeros((n,), float), args_example
@@ -184,7 +201,27 @@ def translate_function(
         (out,) = walk.evaluate(closed.jaxpr, closed.consts, inputs)
     elements = [as_expression(hy, e) for e in np.asarray(out, dtype=object).ravel()]
     shape = tuple(out_aval.shape)
-    return elements, shape, out_aval.dtype, tuple(walk.poisoned)
+    digest = jaxpr_digest(closed, n, args_example)
+    return elements, shape, out_aval.dtype, tuple(walk.poisoned), digest
+
+
+def jaxpr_digest(closed: Any, n: int, args_example: Any) -> str:
+    """SHA-256 of what a translation reads: the jaxpr's text (primitives,
+    parameters, literals), its constants' dtypes, shapes and bytes, the state
+    size, the structure and shapes of `args`, and heyoka's version. Equal
+    digests, equal expressions (within a process, whose rules do not change); a jaxpr printed
+    with a function's address in it (a custom rule) digests anew at each trace,
+    which only costs a compilation."""
+    leaves, treedef = jax.tree_util.tree_flatten(args_example)
+    signature = [(np.shape(x), str(jnp.result_type(x))) for x in leaves]
+    digest = hashlib.sha256()
+    for part in (str(closed.jaxpr), n, treedef, signature, import_heyoka().__version__):
+        digest.update(repr(part).encode())
+    for const in closed.consts:
+        value = np.asarray(const)
+        digest.update(repr((value.dtype.str, value.shape)).encode())
+        digest.update(np.ascontiguousarray(value).tobytes())
+    return digest.hexdigest()
 
 
 def _objects(elements: Sequence[Any], shape: Sequence[int]) -> np.ndarray:
