@@ -3,15 +3,19 @@ equations run by heyoka through the backend (`lagjax.taylor.heyoka_backend`).
 
 The routes, on one pinned core: **heyoka** — the equations derived by heyoka
 itself (`heyoka.lagrangian`) and integrated by `taylor_adaptive` /
-`taylor_adaptive_batch`; **lagjax→heyoka** — the equations derived by lagjax
-(`lj.Lagrangian(L).acceleration`), their jaxpr translated into heyoka's expressions
-(`heyoka_integrate`); **lagjax Taylor (JAX)** — the JAX-native Taylor integrator
+`taylor_adaptive_batch`; **heyoka(translation)** — heyoka's integrator compiled
+from lagjax's translation (below) and called as heyoka's own users call it, no
+lagjax code around the run: what the translation alone costs; **lagjax→heyoka**
+— the equations derived by lagjax (`lj.Lagrangian(L).acceleration`), their jaxpr
+translated into heyoka's expressions (`heyoka_integrate`); **lagjax Taylor (JAX)** — the JAX-native Taylor integrator
 (`lagjax.taylor.taylor_integrate`, jitted: its coefficients from the jaxpr, the
 orders on a tape, `lagjax.taylor.tape`); **lagjax Dopri8** — `lj.simulate` with `diffrax.Dopri8` at
 rtol = atol = 1e-14, jitted; **simulate(Taylor heyoka)** — what a user writes,
 `lj.simulate(lag, y0, solver=lj.Taylor(backend="heyoka"))`, checks and all, the
 solver made once like any diffrax solver (making an `lj.Taylor` is an equinox
-Module's `__init__`, 0.1–0.2 ms); and for the batch **vmap(simulate heyoka)** —
+Module's `__init__`, 0.1–0.2 ms); **jit(simulate heyoka)** — that call for one
+trajectory under `jax.jit`, one `jax.pure_callback`; and for the batch
+**vmap(simulate heyoka)** —
 `jax.jit(jax.vmap(...))` of that call, one `pure_callback` into heyoka's batch
 mode (`lagjax.taylor.heyoka_callback`). Cases, unit masses and rods, g = 9.81:
 
@@ -19,23 +23,30 @@ mode (`lagjax.taylor.heyoka_callback`). Cases, unit masses and rods, g = 9.81:
     and 1e-15; the error is the largest difference of the final state from heyoka
     in long double at tol 1e-18;
 (b) 1024 double pendulums, θ₁ ∈ linspace(0.1, 1), θ₂ = 0.3, to t = 10, heyoka's
-    batch mode at its SIMD width against `jax.jit(jax.vmap(...))`;
+    batch mode at its SIMD width against `jax.jit(jax.vmap(...))`, tol 1e-9,
+    1e-12 and 1e-15;
 (c) the n-link pendulum, n = 2, 4, 8, released at rest from 0.5 rad, to t = 10:
     first call (derivation, translation, compilation) and run.
 
-Runs are medians of warm calls, those of one case's heyoka routes taken in
-turn (a change in the machine's load falls on all alike; 31 rounds for one
-trajectory, 9 for the batch); compilation is timed apart. The process keeps to
+Runs are medians of warm calls in the process's CPU time (`time.process_time`,
+as `benchmarks/taylor.py`), those of one case's heyoka routes taken in turn (a
+change in the machine's load falls on all alike; 31 rounds for one trajectory,
+11 for the batch); compilation is timed apart. The process keeps to
 the first core it may use (`taskset -c 1 python -m benchmarks.heyoka_peer` pins
 core 1). heyoka is optional (`pip install heyoka`). `--quick` shortens every
 run (CI check).
 
-Measured (core 1 of the 2-core machine while other work kept the load at 4–5,
-so absolute times are 5–10× a quiet machine's; routes in turn, against the code
-before per-call set-up was kept, in one process): simulate(Taylor heyoka) /
-heyoka 1.04× at tol 1e-12 and 0.99× at 1e-15 (before: 1.60×, 1.31×); ×1024 to
-t = 10, vmap(simulate heyoka) / heyoka's batch mode 0.97× at tol 1e-9 and 1.05×
-at 1e-15 (before: 1.31×, 1.37×), the states agreeing to 7e-14.
+Measured (core 0 of the 2-core machine, 2026-11-28, while a 2-worker test run
+kept the load at 3.3, so absolute times are about 3× a quiet machine's; the
+ratios are of routes taken in turn in one process): one trajectory to t = 100,
+heyoka(translation) / heyoka 0.94× at tol 1e-12 and 0.97× at 1e-15 (the folded
+translation: 41 terms against heyoka's own 49, `lagjax.taylor.heyoka_signs`);
+simulate(Taylor heyoka) 1.04× and 1.02×; jit(simulate heyoka) 1.10× and 1.07×;
+×1024 to t = 10, heyoka(translation) / heyoka's batch mode 0.93×, 0.90×, 1.01×
+at tol 1e-9, 1e-12, 1e-15, vmap(simulate heyoka) 0.99×, 0.99×, 1.10×; the
+states agreeing with heyoka's to within each tolerance's error. The n-link chains
+run 2.1× (4 links) and 2.7× (8 links) heyoka's time: lagjax's derived equations
+of a long chain are larger than heyoka's own `lagrangian`.
 
 References: F. Biscani & D. Izzo, "Revisiting high-order Taylor methods for
 astrodynamics and celestial mechanics", MNRAS 504 (2021) 2614; À. Jorba & M. Zou,
@@ -62,8 +73,13 @@ from benchmarks.scaling_size import n_link_pendulum_lagrangian
 from lagjax._core.cpu_loops import enable_fast_cpu_loops
 from lagjax.taylor import taylor_integrate
 from lagjax.taylor.heyoka_backend import heyoka_integrate, heyoka_integrate_batch
+from lagjax.taylor.heyoka_cache import heyoka_integrator, translated
 from lagjax.taylor.heyoka_expressions import import_heyoka
 
+# CPU time of this process, not wall time (as benchmarks/taylor.py): on the shared
+# machine another process's load or a preemption then stays out of the figures
+# (the process is pinned to one core, so its threads' time is the core's).
+clock = time.process_time
 DOPRI8_TOL = 1e-14
 REFERENCE_TOL = 1e-18
 FULL = dict(
@@ -71,9 +87,9 @@ FULL = dict(
     single_tols=(1e-12, 1e-15),
     single_repeats=31,
     batch=1024,
-    batch_repeats=9,
+    batch_repeats=11,
     batch_t1=10.0,
-    batch_tols=(1e-9, 1e-15),
+    batch_tols=(1e-9, 1e-12, 1e-15),
     links=(2, 4, 8),
     chain_t1=10.0,
     chain_tol=1e-14,
@@ -96,9 +112,9 @@ def median_seconds(call: Callable[[], Any], repeats: int = 5) -> float:
     call()
     runs = []
     for _ in range(repeats):
-        start = time.perf_counter()
+        start = clock()
         jax.block_until_ready(call())
-        runs.append(time.perf_counter() - start)
+        runs.append(clock() - start)
     return statistics.median(runs)
 
 
@@ -110,16 +126,16 @@ def interleaved_medians(calls: list[Callable[[], Any]], repeats: int) -> list[fl
     runs: list[list[float]] = [[] for _ in calls]
     for _ in range(repeats):
         for call, times in zip(calls, runs):
-            start = time.perf_counter()
+            start = clock()
             jax.block_until_ready(call())
-            times.append(time.perf_counter() - start)
+            times.append(clock() - start)
     return [statistics.median(times) for times in runs]
 
 
 def timed(call: Callable[[], Any]) -> tuple[float, Any]:
-    start = time.perf_counter()
+    start = clock()
     out = jax.block_until_ready(call())
-    return time.perf_counter() - start, out
+    return clock() - start, out
 
 
 class Chain:
@@ -205,15 +221,42 @@ def heyoka_rows(case: str, chain: Chain, y0, t1: float, tol: float, exact,
     def heyoka():
         return heyoka_until(ta, y0, t1)
 
+    n = chain.n
+
+    @jax.jit
+    def jitted(y):  # one member under jit: one pure_callback
+        run = lj.simulate(chain.lagrangian, (y[:n], y[n:]), t1=t1, rtol=tol,
+                          atol=tol, solver=solver)  # fmt: skip
+        return jnp.concatenate([run.q[-1], run.qdot[-1]])
+
+    def simulate_jit():
+        return jitted(y0)
+
     first_s, _ = timed(backend)
+    # heyoka's integrator compiled from lagjax's translation, called directly
+    translation_s, translation = timed(
+        lambda: heyoka_integrator(
+            translated(chain.vector_field, 2 * n, None), tol, 1, np.float64, None
+        )
+    )
+
+    def heyoka_translation():
+        return heyoka_until(translation, y0, t1)
+
     simulate_first_s, _ = timed(simulate_taylor)
-    runs = interleaved_medians([heyoka, backend, simulate_taylor], repeats)
+    jit_first_s, _ = timed(simulate_jit)
+    calls = [heyoka, heyoka_translation, backend, simulate_taylor, simulate_jit]
+    runs = interleaved_medians(calls, repeats)
     return [
         row(case, "heyoka", tol, derive_s + compile_s, heyoka, exact, runs[0]),
-        row(case, "lagjax->heyoka", tol, first_s, backend, exact, runs[1]),
+        row(case, "heyoka(translation)", tol, first_s + translation_s,
+            heyoka_translation, exact, runs[1]),
+        row(case, "lagjax->heyoka", tol, first_s, backend, exact, runs[2]),
         # what a user writes: lj.simulate(lag, y0, solver=lj.Taylor(backend="heyoka"))
         row(case, "simulate(Taylor heyoka)", tol, simulate_first_s, simulate_taylor,
-            exact, runs[2]),
+            exact, runs[3]),
+        row(case, "jit(simulate heyoka)", tol, jit_first_s, simulate_jit, exact,
+            runs[4]),
     ]  # fmt: skip
 
 
@@ -253,14 +296,21 @@ def batch_rows(
     width = import_heyoka().recommended_simd_size()
     compile_s, ta = timed(lambda: chain.heyoka(y0s[0], tol, width=width))
 
-    def raw():
-        out = np.empty_like(y0s)
-        for start in range(0, y0s.shape[0], width):
-            ta.set_time(np.zeros(width))
-            ta.state[:] = y0s[start : start + width].T
-            ta.propagate_until(t1)
-            out[start : start + width] = ta.state.T
-        return out
+    def blocks(integrator: Any) -> Callable[[], np.ndarray]:
+        """The members through a batch integrator, a block of `width` at a time."""
+
+        def run():
+            out = np.empty_like(y0s)
+            for start in range(0, y0s.shape[0], width):
+                integrator.set_time(np.zeros(width))
+                integrator.state[:] = y0s[start : start + width].T
+                integrator.propagate_until(t1)
+                out[start : start + width] = integrator.state.T
+            return out
+
+        return run
+
+    raw = blocks(ta)
 
     def backend():
         return heyoka_integrate_batch(chain.vector_field, y0s, 0.0, t1, tol=tol).ys[
@@ -279,12 +329,19 @@ def batch_rows(
 
     batched = jax.jit(jax.vmap(final))
     first_s, _ = timed(backend)
+    translation_s, translation = timed(
+        lambda: heyoka_integrator(
+            translated(chain.vector_field, 2 * n, None), tol, width, np.float64, None
+        )
+    )
     vmap_first_s, _ = timed(vmapped)
-    runs = interleaved_medians([raw, backend, vmapped], repeats)
+    runs = interleaved_medians([raw, blocks(translation), backend, vmapped], repeats)
     return [row(case, "heyoka", tol, compile_s, raw, exact, runs[0]),
-            row(case, "lagjax->heyoka", tol, first_s, backend, exact, runs[1]),
+            row(case, "heyoka(translation)", tol, first_s + translation_s,
+                blocks(translation), exact, runs[1]),
+            row(case, "lagjax->heyoka", tol, first_s, backend, exact, runs[2]),
             row(case, "vmap(simulate heyoka)", tol, vmap_first_s, vmapped, exact,
-                runs[2])]  # fmt: skip
+                runs[3])]  # fmt: skip
 
 
 def batch_case(config: dict) -> list[dict]:
@@ -301,9 +358,9 @@ def batch_case(config: dict) -> list[dict]:
 def chain_case(config: dict) -> list[dict]:
     rows, t1 = [], config["chain_t1"]
     for n in config["links"]:
-        start = time.perf_counter()
+        start = clock()
         chain = Chain(n)
-        derive_s = time.perf_counter() - start
+        derive_s = clock() - start
         y0 = np.concatenate([np.full(n, 0.5), np.zeros(n)])
         exact = reference(chain, y0, t1)
         case = f"{n}-link"
