@@ -13,6 +13,11 @@ script sweeps both:
   the same tolerances at the order of Jorba & Zou's rule and at higher orders
   (`order=`), where the batch loop's fixed cost per order makes fewer, longer
   steps cheaper;
+- **lagjax → heyoka**: the same `simulate` calls with `lj.Taylor(...,
+  backend="heyoka")` (lagjax's derived equations translated into heyoka's
+  expressions and run by its integrator; one trajectory eagerly, the batch through
+  `jax.jit(jax.vmap(...))`, which hands it to heyoka's batch mode), over the
+  tolerances;
 
 times every setting in turn in one process (CPU time of the process, pinned to
 one core, medians of interleaved rounds, compilation apart), measures its error
@@ -52,6 +57,7 @@ from .taylor import LAGRANGIAN, heyoka_batch
 
 G = 9.81
 clock = time.process_time  # the process's CPU time: another process's load stays out
+SIDES = ("heyoka", "lagjax", "lagjax->heyoka")
 
 
 class Case(NamedTuple):
@@ -114,10 +120,11 @@ def reference(y0s: np.ndarray, t1: float) -> tuple[np.ndarray, str]:
     return out, "heyoka long double tol 1e-19"
 
 
-def lagjax_final(y: jax.Array, t1: float, tol: float, order: int | None):
-    solver = lj.Taylor(rtol=tol, atol=tol, order=order)
+def lagjax_final(y, t1: float, tol: float, order: int | None, backend: str = "jax"):
+    solver = lj.Taylor(rtol=tol, atol=tol, order=order, backend=backend)
     run = lj.simulate(LAGRANGIAN, (y[:2], y[2:]), t1=t1, solver=solver)
-    return jnp.concatenate([run.q[-1], run.qdot[-1]])
+    eager = isinstance(run.q, np.ndarray)  # heyoka's route on NumPy values
+    return (np.concatenate if eager else jnp.concatenate)([run.q[-1], run.qdot[-1]])
 
 
 def heyoka_call(y0s: np.ndarray, case: Case, tol: float) -> Callable | None:
@@ -144,6 +151,28 @@ def heyoka_call(y0s: np.ndarray, case: Case, tol: float) -> Callable | None:
     return run
 
 
+def heyoka_installed() -> bool:
+    try:
+        import heyoka  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def heyoka_route_call(y0s: np.ndarray, case: Case, tol: float) -> Callable:
+    """As `lagjax_call`, through `lj.Taylor(backend="heyoka")`: the batch by
+    `jax.jit(jax.vmap(simulate))`, one trajectory by `simulate` on NumPy values
+    (no JAX: the call goes to heyoka directly)."""
+    final = lambda y: lagjax_final(y, case.t1, tol, None, backend="heyoka")
+    if case.members:
+        batch = jax.jit(jax.vmap(final))
+        run = lambda states: np.asarray(batch(jnp.asarray(states)))
+    else:
+        run = lambda states: np.stack([np.asarray(final(y)) for y in states])
+    run(y0s)  # translate and compile apart
+    return run
+
+
 def lagjax_call(y0s: np.ndarray, case: Case, tol: float, order: int) -> Callable:
     """As `heyoka_call`: `jax.jit(jax.vmap(simulate))` on the batch, or
     `jax.jit(simulate)` once per row."""
@@ -165,6 +194,9 @@ def settings(y0s: np.ndarray, case: Case) -> list[dict]:
         call = heyoka_call(y0s, case, tol)
         if call is not None:
             rows.append(dict(side="heyoka", tol=tol, order=None, call=call))
+    for tol in case.lagjax_tols if heyoka_installed() else ():
+        call = heyoka_route_call(y0s, case, tol)
+        rows.append(dict(side="lagjax->heyoka", tol=tol, order=None, call=call))
     for tol in case.lagjax_tols:
         rule = order_from_tolerance(tol)
         for extra in case.extra_orders:
@@ -215,11 +247,12 @@ def measure(case: Case) -> dict:
 def best_at(rows: list[dict], target: float) -> dict:
     """Each side's fastest setting with error ≤ target, and lagjax/heyoka."""
     out: dict = {}
-    for side in ("heyoka", "lagjax"):
+    for side in SIDES:
         meeting = [r for r in rows if r["side"] == side and r["error"] <= target]
         out[side] = min(meeting, key=lambda r: r["seconds"]) if meeting else None
-    if out["heyoka"] and out["lagjax"]:
-        out["ratio"] = out["lagjax"]["seconds"] / out["heyoka"]["seconds"]
+    for side, key in (("lagjax", "ratio"), ("lagjax->heyoka", "heyoka_route_ratio")):
+        if out["heyoka"] and out[side]:
+            out[key] = out[side]["seconds"] / out["heyoka"]["seconds"]
     return out
 
 
@@ -237,11 +270,13 @@ def report(result: dict) -> None:
         f"\n{result['case']} to t = {result['t1']} (reference: {result['reference']})"
     )
     for row in sorted(result["rows"], key=lambda r: (r["side"], r["seconds"])):
-        print(f"  {row['side']:7s} {describe(row)}")
+        print(f"  {row['side']:14s} {describe(row)}")
     for target, best in result["best"].items():
-        ratio = f"  -> lagjax/heyoka {best['ratio']:.2f}" if "ratio" in best else ""
-        print(f"  error <= {target:.0e}: heyoka {describe(best['heyoka'])}; "
-              f"lagjax {describe(best['lagjax'])}{ratio}")  # fmt: skip
+        print(f"  error <= {target:.0e}:")
+        for side in SIDES:
+            key = {"lagjax": "ratio", "lagjax->heyoka": "heyoka_route_ratio"}.get(side)
+            ratio = f"  ({best[key]:.2f}x heyoka)" if key in best else ""
+            print(f"    {side:14s} {describe(best[side])}{ratio}")
 
 
 def front(rows: list[dict]) -> list[dict]:
@@ -265,7 +300,7 @@ def draw(results: list[dict], path: str) -> None:
 
     fig, axes = plt.subplots(1, len(results), figsize=(5.5 * len(results), 4.2))
     for ax, result in zip(np.atleast_1d(axes), results):
-        for side, label in (("heyoka", "heyoka"), ("lagjax", "lagjax Taylor")):
+        for side, label in zip(SIDES, ("heyoka", "lagjax Taylor", "lagjax → heyoka")):
             rows = [r for r in result["rows"] if r["side"] == side]
             kept, tint = front(rows), colour(label)
             ax.loglog([r["seconds"] * 1e3 for r in rows], [r["error"] for r in rows],
