@@ -141,3 +141,29 @@ def test_a_failed_repeat_raises_the_first_call_path_error(first_calls):
         repeated(start(), **pendulum)
     assert str(repeat.value) == str(first.value)
     assert len(first_calls) == 1  # the failed run was a repeat
+
+
+def test_one_member_statistics_equal_the_general_ones():
+    """One concrete member's `traj.stats` come from fewer NumPy calls (cold after
+    a heyoka run): the general path's values and types, for a run that reached
+    t1, ran out of steps, turned non-finite, or was refused its times."""
+    from lagjax._integrate import taylor_heyoka
+    from lagjax.taylor.heyoka_runs import (
+        BAD_TIMES,
+        NON_FINITE,
+        STEP_LIMIT,
+        SUCCESS,
+        Rows,
+    )
+
+    state = np.array([[0.5, 0.3, 0.1, -0.2]])
+    for code, ys in ((SUCCESS, state), (STEP_LIMIT, state * np.nan),
+                     (NON_FINITE, state * np.inf), (BAD_TIMES, state * np.nan)):  # fmt: skip
+        rows = Rows(np.array([2.0]), ys, np.asarray(17, np.int64),
+                    np.asarray(code, np.int32))  # fmt: skip
+        fast = taylor_heyoka.run_statistics(rows, None, 100)
+        general = taylor_heyoka._statistics(rows, None, 100)
+        assert list(fast) == list(general)
+        for key, value in general.items():
+            assert type(fast[key]) is type(value), key
+            assert fast[key] == value, key

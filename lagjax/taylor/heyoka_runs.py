@@ -140,7 +140,9 @@ class HeyokaRunner:
         if self.events or not self.final_only:
             raise ValueError("final_state runs to t1 without events; use the call")
         ta.time = self.fp_type(t0)
-        ta.state[:], ta.pars[:] = y0, pars
+        ta.state[:] = y0
+        if len(pars):
+            ta.pars[:] = pars
         outcome, _, _, steps, *_ = ta.propagate_until(
             self.fp_type(t1), max_steps=self.max_steps
         )
