@@ -35,6 +35,8 @@ import numpy as np
 
 import lagjax.taylor.recurrences as rec
 
+from .graph_signs import Signs, fold, foldable, rewrite
+
 CALLS = frozenset(
     {"pjit", "jit", "closed_call", "core_call", "remat", "checkpoint"}
     | {"custom_jvp_call", "custom_vjp_call", "custom_vjp_call_jaxpr"}
@@ -121,6 +123,7 @@ class _Builder:
         self.constants: dict[int, Any] = {}
         self.avals: dict[int, Any] = {}
         self.seen: dict[Any, tuple[int, ...]] = {}
+        self.signs = Signs(self)
 
     def new(self, aval: Any, series: bool) -> int:
         index = len(self.avals)
@@ -204,6 +207,10 @@ def _series_rule(builder: _Builder, eqn: Any, ins: list[int]) -> tuple[int, ...]
             and avals[0].shape == builder.avals[ins[1 - ins.index(one[0])]].shape
         ):
             return (ins[1 - ins.index(one[0])],)
+    signed = rewrite(builder.signs, name, ins, flags, avals)
+    if signed is not None:
+        return signed
+    if name == "mul" or name == "dot_general":
         rule = (
             rec.Product(primitive=prim, params=params, series=flags)
             if all(flags)
@@ -309,6 +316,9 @@ def _walk(
             outs = _lower_cond(builder, eqn, ins)
         elif any(builder.flags(ins)) and any(_is_float(v.aval) for v in eqn.outvars):
             outs = _series_rule(builder, eqn, ins)
+        elif foldable(eqn, ins, builder.constants):
+            values = fold(eqn, [builder.constants[i] for i in ins])
+            outs = tuple(builder.constant(value) for value in values)
         else:
             rule = rec.Fixed(
                 primitive=eqn.primitive, params=_params(eqn), series=builder.flags(ins)
