@@ -15,10 +15,10 @@ twice). Here, as `graph` lowers each operation:
   (−a) + b = b − a, a − (−b) = a + b, (−a) − (−b) = b − a, (−a) ± (−b) = −(a ± b).
 
 Every rewrite is exact in floating point (negation is exact, and IEEE addition
-and multiplication are symmetric in sign), so the coefficients are bit for bit
-those of the unfolded graph up to the order of the remaining operations. The
-double pendulum's graph: 9 → 8 products and 41 → 33 series operations
-(`Graph.census`).
+and multiplication are symmetric in sign); a product's factors are put in a fixed
+order, which reverses the summation order of some Cauchy sums, so coefficients
+agree with the unfolded graph's to rounding, not bit for bit. The double
+pendulum's graph: 9 → 8 products and 38 → 28 series operations (`Graph.census`).
 
 References: the same rules as `lagjax.taylor.heyoka_signs` for the heyoka
 translation; Muller et al., *Handbook of Floating-Point Arithmetic* (2018), §2
