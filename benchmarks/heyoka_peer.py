@@ -70,6 +70,7 @@ import numpy as np
 
 import lagjax as lj
 from benchmarks.scaling_size import n_link_pendulum_lagrangian
+from benchmarks.taylor import in_blocks
 from lagjax._core.cpu_loops import enable_fast_cpu_loops
 from lagjax.taylor import taylor_integrate
 from lagjax.taylor.heyoka_backend import heyoka_integrate, heyoka_integrate_batch
@@ -298,17 +299,7 @@ def batch_rows(
 
     def blocks(integrator: Any) -> Callable[[], np.ndarray]:
         """The members through a batch integrator, a block of `width` at a time."""
-
-        def run():
-            out = np.empty_like(y0s)
-            for start in range(0, y0s.shape[0], width):
-                integrator.set_time(np.zeros(width))
-                integrator.state[:] = y0s[start : start + width].T
-                integrator.propagate_until(t1)
-                out[start : start + width] = integrator.state.T
-            return out
-
-        return run
+        return in_blocks(integrator, y0s, t1, width)
 
     raw = blocks(ta)
 

@@ -182,6 +182,13 @@ def heyoka_batch(y0s: np.ndarray, t1: float, tol: float) -> Callable | None:
         tol=tol,
     )
 
+    return in_blocks(integrator, y0s, t1, width)
+
+
+def in_blocks(integrator, y0s: np.ndarray, t1: float, width: int) -> Callable:
+    """A call that runs the members `y0s` (B, n) to `t1` through a heyoka batch
+    integrator, a block of `width` at a time, and returns the final states."""
+
     def run():
         out = np.empty_like(y0s)
         for start in range(0, len(y0s), width):
