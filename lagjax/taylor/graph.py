@@ -35,7 +35,7 @@ import numpy as np
 
 import lagjax.taylor.recurrences as rec
 
-from .graph_signs import Signs, fold, foldable, rewrite
+from .graph_signs import Signs, default_params, fold, foldable, rewrite
 
 CALLS = frozenset(
     {"pjit", "jit", "closed_call", "core_call", "remat", "checkpoint"}
@@ -153,10 +153,11 @@ class _Builder:
     def primitive(self, name: str, ins, aval) -> int:
         """One more series operation (used when rewriting x**n and x**2)."""
         prim = getattr(jax.lax, f"{name}_p")
+        params = default_params(name)
         rule = (
-            rec.Product(primitive=prim, params={}, series=(True, True))
+            rec.Product(primitive=prim, params=params, series=(True, True))
             if name == "mul"
-            else rec.Quotient(primitive=prim, params={}, series=self.flags(ins))
+            else rec.Quotient(primitive=prim, params=params, series=self.flags(ins))
         )
         return self.emit(rule, ins, [aval], True, key=(name, tuple(ins), ()))[0]
 

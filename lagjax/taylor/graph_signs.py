@@ -27,6 +27,7 @@ translation; Muller et al., *Handbook of Floating-Point Arithmetic* (2018), §2
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 import jax
@@ -38,6 +39,20 @@ import lagjax.taylor.recurrences as rec
 # Constant operations folded at lowering only up to this many elements: a large
 # constant array computed at trace time would be baked into the program.
 FOLD_SIZE = 64
+
+
+@functools.cache
+def default_params(name: str) -> dict:
+    """The params a jaxpr gives the elementwise primitive `name` (jax 0.10's
+    `mul` carries `out_dtype=None`, which its transpose rule requires): a rule
+    made here must look like one read off a jaxpr, for `jax.grad` to enter it."""
+    examples = {"mul": jax.lax.mul, "div": jax.lax.div, "add": jax.lax.add,
+                "sub": jax.lax.sub}  # fmt: skip
+    if name == "neg":
+        jaxpr = jax.make_jaxpr(jax.lax.neg)(1.0)
+    else:
+        jaxpr = jax.make_jaxpr(examples[name])(1.0, 1.0)
+    return dict(jaxpr.eqns[0].params)
 
 
 def foldable(eqn: Any, ins: list[int], constants: dict) -> bool:
@@ -81,7 +96,9 @@ class Signs:
         """−x: the base of a negation, or one more negation (shared)."""
         if x in self.negation_of:
             return self.negation_of[x]
-        rule = rec.Affine(primitive=jax.lax.neg_p, params={}, series=(True,))
+        rule = rec.Affine(
+            primitive=jax.lax.neg_p, params=default_params("neg"), series=(True,)
+        )
         aval = self.builder.avals[x]
         (out,) = self.builder.emit(rule, [x], [aval], True, key=("neg", (x,), ()))
         self.negation_of[out] = x
@@ -117,7 +134,9 @@ class Signs:
 
     def _emit(self, name: str, a: int, b: int, aval: Any) -> int:
         prim = getattr(jax.lax, f"{name}_p")
-        rule = rec.Affine(primitive=prim, params={}, series=(True, True))
+        rule = rec.Affine(
+            primitive=prim, params=default_params(name), series=(True, True)
+        )
         ins = sorted((a, b)) if name == "add" else [a, b]
         key = (name, tuple(ins), ())
         return self.builder.emit(rule, ins, [aval], True, key=key)[0]
@@ -151,7 +170,9 @@ def rewrite(
             return (signs.negate(series),)
         sign, base = signs.split(series)
         scaled = [fixed, base] if flags[1] else [base, fixed]
-        rule = rec.Scale(primitive=jax.lax.mul_p, params={}, series=flags)
+        rule = rec.Scale(
+            primitive=jax.lax.mul_p, params=default_params("mul"), series=flags
+        )
         key = ("mul", tuple(scaled), ())
         return (signs.signed(sign, builder.emit(rule, scaled, [aval], True, key)[0]),)
     if name == "div" and flags == (False, True):
