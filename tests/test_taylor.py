@@ -152,11 +152,15 @@ def _fixed_steps(f, y0, h, n, order):
 def test_compensated_advance_keeps_increments_below_the_last_bit():
     """A thousand increments of 1e-17 on y = 1 (each below half an ulp): a plain
     sum keeps 1.0; the compensated state ends at 1 + 1e-14 to round-off."""
-    y, y_low = jnp.ones(1), jnp.zeros(1)
-    for _ in range(1000):
-        coeffs = jnp.stack([y, jnp.full(1, 1e-17)])
-        assert float(horner(coeffs, 1.0)[0]) == float(y[0])  # plain: lost
-        y, y_low = compensated_advance(coeffs, jnp.asarray(1.0), y_low)
+    coeffs = lambda y: jnp.stack([y, jnp.full(1, 1e-17)])
+    assert float(horner(coeffs(jnp.ones(1)), 1.0)[0]) == 1.0  # plain: lost
+
+    def step(_, state):
+        return compensated_advance(coeffs(state[0]), jnp.asarray(1.0), state[1])
+
+    y, y_low = jax.jit(
+        lambda: jax.lax.fori_loop(0, 1000, step, (jnp.ones(1), jnp.zeros(1)))
+    )()
     total = np.longdouble(float(y[0])) + np.longdouble(float(y_low[0]))
     assert abs(float(total - (1 + np.longdouble(1e-14)))) < 1e-27
     assert abs(float(y[0]) - (1 + 1e-14)) <= 2.3e-16  # the high part moved too
