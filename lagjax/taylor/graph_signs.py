@@ -46,12 +46,8 @@ def default_params(name: str) -> dict:
     """The params a jaxpr gives the elementwise primitive `name` (jax 0.10's
     `mul` carries `out_dtype=None`, which its transpose rule requires): a rule
     made here must look like one read off a jaxpr, for `jax.grad` to enter it."""
-    examples = {"mul": jax.lax.mul, "div": jax.lax.div, "add": jax.lax.add,
-                "sub": jax.lax.sub}  # fmt: skip
-    if name == "neg":
-        jaxpr = jax.make_jaxpr(jax.lax.neg)(1.0)
-    else:
-        jaxpr = jax.make_jaxpr(examples[name])(1.0, 1.0)
+    operands = (1.0,) if name == "neg" else (1.0, 1.0)
+    jaxpr = jax.make_jaxpr(getattr(jax.lax, name))(*operands)
     return dict(jaxpr.eqns[0].params)
 
 
