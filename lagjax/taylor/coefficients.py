@@ -38,7 +38,8 @@ import jax.numpy as jnp
 
 from lagjax._linalg.scalarize import as_object_array, objects_from_scalars, scalarize
 
-from .graph import Graph, lower
+from .graph import lower
+from .graph_values import Graph
 from .recurrences import with_coefficient
 from .tape import supports, tape_coefficients
 

@@ -25,8 +25,7 @@ elementary operations.
 
 from __future__ import annotations
 
-from collections import Counter
-from typing import Any, NamedTuple
+from typing import Any
 
 import jax
 import jax.extend as jex
@@ -35,7 +34,16 @@ import numpy as np
 
 import lagjax.taylor.recurrences as rec
 
-from .graph_signs import Signs, default_params, fold, foldable, rewrite
+from .graph_signs import fold, foldable, rewrite
+from .graph_values import (
+    Builder,
+    Graph,
+    Op,
+    frozen_params,
+    inner_jaxpr,
+    is_float,
+    primitive_params,
+)
 
 CALLS = frozenset(
     {"pjit", "jit", "closed_call", "core_call", "remat", "checkpoint"}
@@ -51,125 +59,14 @@ PIECEWISE_CONSTANT = frozenset({"sign", "floor", "ceil", "round", "stop_gradient
 BRANCHES = frozenset({"abs", "max", "min"})
 
 
-class Op(NamedTuple):
-    rule: rec.AbstractRule
-    ins: tuple[int, ...]
-    outs: tuple[int, ...]
-
-
-class Graph(NamedTuple):
-    """Operations in evaluation order; values are integer ids."""
-
-    ops: tuple[Op, ...]
-    series: frozenset[int]
-    constants: dict[int, Any]
-    avals: dict[int, Any]
-    inputs: tuple[int, ...]  # t, the state, then the leaves of args
-    state: tuple[int, ...]  # y, or its elements y₀..yₙ₋₁ in a scalar graph
-    outputs: tuple[int, ...]  # dy/dt, or its elements in a scalar graph
-    scalar: bool = False  # every value a scalar; args enter element by element
-
-    def census(self) -> Counter:
-        """How many series operations of each rule the graph evaluates."""
-        return Counter(
-            type(op.rule).__name__ for op in self.ops if op.outs[0] in self.series
-        )
-
-
-def _is_float(aval: Any) -> bool:
-    return jnp.issubdtype(aval.dtype, jnp.inexact)
-
-
-def _plain(value: Any) -> Any:
-    """NumPy scalars inside a primitive's params (`split`'s sizes are np.int64)
-    as Python numbers: the params are a static field of the rule, and equinox
-    warns of (and JAX would not hash) array leaves there."""
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, tuple) and not hasattr(value, "_fields"):
-        return tuple(_plain(v) for v in value)
-    return value
-
-
-def _params(eqn: Any) -> dict:
-    return {name: _plain(value) for name, value in eqn.params.items()}
-
-
-def _frozen(params: dict) -> tuple | None:
-    try:
-        key = tuple(sorted(params.items()))
-        hash(key)
-        return key
-    except TypeError:
-        return None
-
-
-def _inner(eqn: Any) -> tuple[Any, list]:
-    for name in ("jaxpr", "call_jaxpr", "fun_jaxpr"):
-        inner = eqn.params.get(name)
-        if inner is not None:
-            if hasattr(inner, "consts"):
-                return inner.jaxpr, list(inner.consts)
-            return inner, []
-    raise NotImplementedError(
-        f"lagjax.Taylor: cannot enter the call primitive {eqn.primitive.name!r}"
-    )
-
-
-class _Builder:
-    def __init__(self) -> None:
-        self.ops: list[Op] = []
-        self.series: set[int] = set()
-        self.constants: dict[int, Any] = {}
-        self.avals: dict[int, Any] = {}
-        self.seen: dict[Any, tuple[int, ...]] = {}
-        self.signs = Signs(self)
-
-    def new(self, aval: Any, series: bool) -> int:
-        index = len(self.avals)
-        self.avals[index] = aval
-        if series:
-            self.series.add(index)
-        return index
-
-    def constant(self, value: Any) -> int:
-        value = jnp.asarray(value) if not hasattr(value, "aval") else value
-        index = self.new(jax.typeof(value), series=False)
-        self.constants[index] = value
-        return index
-
-    def emit(self, rule, ins, out_avals, series: bool, key=None) -> tuple[int, ...]:
-        if key is not None and key in self.seen:
-            return self.seen[key]
-        outs = tuple(self.new(aval, series) for aval in out_avals)
-        self.ops.append(Op(rule, tuple(ins), outs))
-        if key is not None:
-            self.seen[key] = outs
-        return outs
-
-    def flags(self, ins) -> tuple[bool, ...]:
-        return tuple(i in self.series for i in ins)
-
-    def primitive(self, name: str, ins, aval) -> int:
-        """One more series operation (used when rewriting x**n and x**2)."""
-        prim = getattr(jax.lax, f"{name}_p")
-        params = default_params(name)
-        rule = (
-            rec.Product(primitive=prim, params=params, series=(True, True))
-            if name == "mul"
-            else rec.Quotient(primitive=prim, params=params, series=self.flags(ins))
-        )
-        return self.emit(rule, ins, [aval], True, key=(name, tuple(ins), ()))[0]
-
-
-def _literal_is(builder: _Builder, index: int, value: float) -> bool:
+def _literal_is(builder: Builder, index: int, value: float) -> bool:
     const = builder.constants.get(index)
     return (
         const is not None and np.shape(const) == () and bool(np.asarray(const) == value)
     )
 
 
-def _integer_power(builder: _Builder, x: int, n: int, aval: Any) -> int:
+def _integer_power(builder: Builder, x: int, n: int, aval: Any) -> int:
     """xⁿ by repeated squaring: products stay exact through x = 0."""
     if n == 0:
         return builder.constant(jnp.ones(aval.shape, aval.dtype))
@@ -193,12 +90,12 @@ def _integer_power(builder: _Builder, x: int, n: int, aval: Any) -> int:
     return result
 
 
-def _series_rule(builder: _Builder, eqn: Any, ins: list[int]) -> tuple[int, ...]:
+def _series_rule(builder: Builder, eqn: Any, ins: list[int]) -> tuple[int, ...]:
     """Lower one operation with a series input to its rule."""
-    name, prim, params = eqn.primitive.name, eqn.primitive, _params(eqn)
+    name, prim, params = eqn.primitive.name, eqn.primitive, primitive_params(eqn)
     flags = builder.flags(ins)
     avals = [v.aval for v in eqn.outvars]
-    key = (name, tuple(ins), _frozen(params))
+    key = (name, tuple(ins), frozen_params(params))
     key = None if key[2] is None else key
     if name == "mul" or name == "dot_general":
         one = [i for i, f in zip(ins, flags) if not f and _literal_is(builder, i, 1.0)]
@@ -288,16 +185,16 @@ def _series_rule(builder: _Builder, eqn: Any, ins: list[int]) -> tuple[int, ...]
     return builder.emit(rule, ins, avals, True, key=key)
 
 
-def _affine(builder: _Builder, eqn: Any, ins: list[int], key: Any) -> tuple[int, ...]:
+def _affine(builder: Builder, eqn: Any, ins: list[int], key: Any) -> tuple[int, ...]:
     rule = rec.Affine(
-        primitive=eqn.primitive, params=_params(eqn), series=builder.flags(ins)
+        primitive=eqn.primitive, params=primitive_params(eqn), series=builder.flags(ins)
     )
     avals = [v.aval for v in eqn.outvars]
     return builder.emit(rule, ins, avals, True, key=key)
 
 
 def _walk(
-    builder: _Builder, jaxpr: Any, consts: list[int], inputs: list[int]
+    builder: Builder, jaxpr: Any, consts: list[int], inputs: list[int]
 ) -> list[int]:
     env: dict[Any, int] = dict(zip(jaxpr.constvars, consts))
     env.update(zip(jaxpr.invars, inputs))
@@ -310,26 +207,28 @@ def _walk(
     for eqn in jaxpr.eqns:
         ins = [read(v) for v in eqn.invars]
         if eqn.primitive.name in CALLS:
-            inner, consts = _inner(eqn)
+            inner, consts = inner_jaxpr(eqn)
             const_ids = [builder.constant(c) for c in consts]
             outs = _walk(builder, inner, const_ids, ins)
         elif eqn.primitive.name == "cond" and any(builder.flags(ins[1:])):
             outs = _lower_cond(builder, eqn, ins)
-        elif any(builder.flags(ins)) and any(_is_float(v.aval) for v in eqn.outvars):
+        elif any(builder.flags(ins)) and any(is_float(v.aval) for v in eqn.outvars):
             outs = _series_rule(builder, eqn, ins)
         elif foldable(eqn, ins, builder.constants):
             values = fold(eqn, [builder.constants[i] for i in ins])
             outs = tuple(builder.constant(value) for value in values)
         else:
             rule = rec.Fixed(
-                primitive=eqn.primitive, params=_params(eqn), series=builder.flags(ins)
+                primitive=eqn.primitive,
+                params=primitive_params(eqn),
+                series=builder.flags(ins),
             )
             outs = builder.emit(rule, ins, [v.aval for v in eqn.outvars], False)
         env.update(zip(eqn.outvars, outs))
     return [read(v) for v in jaxpr.outvars]
 
 
-def _lower_cond(builder: _Builder, eqn: Any, ins: list[int]) -> list[int]:
+def _lower_cond(builder: Builder, eqn: Any, ins: list[int]) -> list[int]:
     """`lax.cond`/`lax.switch` on series operands: every branch in place, each
     output the branch that the order-0 index selects (`select_n`, like `Branch`:
     the step keeps the side where it starts). A branch with a primitive that has
@@ -350,7 +249,7 @@ def _lower_cond(builder: _Builder, eqn: Any, ins: list[int]) -> list[int]:
     outs = []
     for position, var in enumerate(eqn.outvars):
         aval = var.aval
-        poison = jnp.full(aval.shape, jnp.nan if _is_float(aval) else 0, aval.dtype)
+        poison = jnp.full(aval.shape, jnp.nan if is_float(aval) else 0, aval.dtype)
         cases = [
             builder.constant(poison) if taken is None else taken[position]
             for taken in branches
@@ -360,7 +259,7 @@ def _lower_cond(builder: _Builder, eqn: Any, ins: list[int]) -> list[int]:
             params={},
             series=builder.flags((index, *cases)),
         )
-        series = _is_float(aval) and any(builder.flags(cases))
+        series = is_float(aval) and any(builder.flags(cases))
         (out,) = builder.emit(
             rule
             if series
@@ -392,7 +291,7 @@ def lower(closed_jaxpr: Any, state_size: int | None = None) -> Graph:
     if not scalar and len(jaxpr.outvars) != 1:
         raise TypeError("lagjax.Taylor: the vector field must return one flat array")
     series_inputs = 1 + (state_size if scalar else 1)
-    builder = _Builder()
+    builder = Builder()
     const_ids = [builder.constant(c) for c in closed_jaxpr.consts]
     inputs = [
         builder.new(v.aval, series=position < series_inputs)

@@ -70,7 +70,7 @@ import numpy as np
 
 import lagjax.taylor.recurrences as rec
 
-from .graph import Graph
+from .graph_values import Graph
 
 # Which sums each rule needs: (x, y, j-weighted) with x, y naming an input ("i0",
 # "i1") or an output ("o0", "o1") of the operation; the sum is Σ_{j=1}^{k−1} xⱼ yₖ₋ⱼ.
