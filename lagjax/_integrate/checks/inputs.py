@@ -42,15 +42,19 @@ import typing
 import warnings
 from typing import Any
 
-import diffrax
 import jax
 import numpy as np
 from jax.core import Tracer
 
 from lagjax._core.precision import working_dtype
-from lagjax._core.system import AbstractSystem
 from lagjax._integrate.checks.initial_state import (
     check_initial_state,
+)
+from lagjax._integrate.checks.system_and_solver import (
+    check_solver,
+    check_solver_fits,
+    check_system,
+    user_system,
 )
 
 # More steps than this cannot finish in a session (at ~10 ns a step, 10⁹ steps
@@ -58,8 +62,6 @@ from lagjax._integrate.checks.initial_state import (
 MAX_FIXED_STEPS = 10**9
 # The smallest normal float64: a span below it is subnormal, steps in it lose bits.
 _TINY = float(np.finfo(np.float64).tiny)
-
-_IMEX_SOLVERS = (diffrax.KenCarp3, diffrax.KenCarp4, diffrax.KenCarp5, diffrax.Sil3)
 
 
 def check_simulate_inputs(
@@ -83,7 +85,7 @@ def check_simulate_inputs(
     """
     check_system(system)
     check_solver(solver)
-    check_solver_fits(_user_system(system), solver)
+    check_solver_fits(user_system(system), solver)
     check_max_steps(max_steps)
     check_tolerances(rtol, atol)
     check_times(t0, t1, dt)
@@ -96,73 +98,6 @@ def check_simulate_inputs(
     if dt is None:
         check_tolerance_resolution(rtol, atol, dtype)
     return y0
-
-
-def _user_system(system: Any) -> Any:
-    """The system whose convention `y0` follows (a scene's `system()`)."""
-    return system.resolve(None)[0]
-
-
-def check_system(system: Any) -> None:
-    """`system` must be a lagjax system instance."""
-    if isinstance(system, AbstractSystem):
-        return
-    if isinstance(system, type) and issubclass(system, AbstractSystem):
-        raise TypeError(
-            f"system is the class {system.__name__}, not an instance: pass "
-            f"{system.__name__}(...) (a scene: {system.__name__}() for its defaults)"
-        )
-    if callable(system):
-        raise TypeError(
-            "system is a plain function; simulate needs a lagjax system: wrap it as "
-            "lagjax.Lagrangian(L) for L(q, qdot) or lagjax.Hamiltonian(H) for "
-            "H(q, p) (or pick a scene from lagjax.scenes)"
-        )
-    raise TypeError(
-        f"system must be a lagjax system (Lagrangian, Hamiltonian, "
-        f"SeparableHamiltonian, RigidBody or a scene), got {type(system).__name__}"
-    )
-
-
-def check_solver(solver: Any) -> None:
-    """`solver` must be None or an ODE solver instance (not a class or a name)."""
-    if solver is None:
-        return
-    if isinstance(solver, str):
-        raise TypeError(
-            f"solver must be a solver object, not the string {solver!r}: pass an "
-            "instance such as diffrax.Tsit5() or lagjax.Yoshida4()"
-        )
-    if isinstance(solver, type):
-        raise TypeError(
-            f"solver is the class {solver.__name__}, not an instance: pass "
-            f"{solver.__name__}() (with its arguments, if any)"
-        )
-    if not isinstance(solver, diffrax.AbstractSolver):
-        raise TypeError(
-            f"solver must be a diffrax or lagjax solver instance, got "
-            f"{type(solver).__name__}"
-        )
-    if typing.get_origin(solver.term_structure) is diffrax.MultiTerm:
-        name = type(solver).__name__
-        if isinstance(solver, _IMEX_SOLVERS):
-            raise TypeError(
-                f"{name} is an IMEX solver: it needs the vector field split into "
-                "explicit and implicit terms, which simulate does not make. For a "
-                "stiff system use diffrax.Kvaerno5() (with dt=None)"
-            )
-        raise TypeError(
-            f"{name} is a stochastic (SDE) solver: it needs a diffusion term driven "
-            "by Brownian motion, and lagjax integrates deterministic equations of "
-            "motion. Use an ODE solver: diffrax.Tsit5(), diffrax.Dopri8() or a "
-            "symplectic lagjax solver"
-        )
-
-
-def check_solver_fits(system: Any, solver: Any) -> None:
-    """Solvers written for one kind of system refuse the others by name."""
-    if solver is not None:
-        system.refuse_solver(solver)
 
 
 def check_max_steps(max_steps: Any) -> None:
