@@ -167,3 +167,83 @@ def test_one_member_statistics_equal_the_general_ones():
         for key, value in general.items():
             assert type(fast[key]) is type(value), key
             assert fast[key] == value, key
+
+
+def pendulum(q, qd, t, args):
+    """One coordinate: q and q̇ scalars."""
+    return 0.5 * qd**2 + args["g"] * jnp.cos(q)
+
+
+SIMPLE = lj.Lagrangian(pendulum)
+
+
+@pytest.mark.parametrize(
+    "system, make_y0",
+    [
+        (PENDULUM, lambda a: (np.array([a, 0.3]), np.zeros(2))),  # no flatten
+        (PENDULUM, lambda a: [np.array([a, 0.3]), np.zeros(2)]),  # a list: flattened
+        (PENDULUM, lambda a: (np.array([a, 0.3]), np.zeros(2, np.int64))),  # cast
+        (PENDULUM, lambda a: (jnp.array([a, 0.3]), jnp.zeros(2))),  # JAX arrays
+        (SIMPLE, lambda a: (a, 0.0)),  # Python floats: no flatten
+    ],
+)
+def test_each_kind_of_y0_repeats_the_first_call_path_trajectory(
+    system, make_y0, first_calls
+):
+    """y0 a plain tuple of NumPy arrays or floats takes the repeat's short way
+    (its key without a pytree flatten, one `concatenate`); any other y0 the
+    general one: the first-call path's trajectory either way, and one first
+    call for the structure."""
+    args, finals = {"g": 9.81}, []
+    for a in (0.5, 0.8, 0.5):
+        y0 = make_y0(a)
+        run = lj.simulate(system, y0, t1=2.0, args=args, rtol=TOL, atol=TOL,
+                          solver=lj.Taylor(backend="heyoka"))  # fmt: skip
+        first = run_taylor(system, y0, 0.0, 2.0, None, lj.Taylor(backend="heyoka"),
+                           None, args, TOL, TOL, None, True)  # fmt: skip
+        same_trajectory(run, first)
+        finals.append(np.asarray(run.q[-1]))
+    assert len(first_calls) == 1  # the later calls were repeats
+    assert not np.allclose(finals[0], finals[1])  # y0 read anew
+    np.testing.assert_array_equal(finals[0], finals[2])
+
+
+def test_a_system_s_own_pair_check_runs_on_a_repeat(first_calls):
+    """The default `checked_state_pair` reads only structure and shapes, which
+    the repeat's key fixes; a system's own may read values, and a repeat
+    refuses what it refuses, with its error."""
+
+    class Guarded(lj.Lagrangian):
+        def checked_state_pair(self, first, second):
+            if np.asarray(first)[0] > 1.0:
+                raise ValueError("q0[0] above 1: refused by the system")
+            return super().checked_state_pair(first, second)
+
+    guarded = Guarded(double_pendulum)  # pyright: ignore[reportCallIssue]
+
+    def run(a: float):
+        return lj.simulate(guarded, start(a), t1=1.0, args={"g": 9.81}, rtol=TOL,
+                           atol=TOL, solver=lj.Taylor(backend="heyoka"))  # fmt: skip
+
+    run(0.5)
+    run(0.9)
+    assert len(first_calls) == 1
+    with pytest.raises(ValueError, match="refused by the system"):
+        run(1.5)
+    assert len(first_calls) == 2  # the repeat handed the bad call over
+
+
+def test_all_finite_equals_numpy():
+    """The finiteness of a small state read from its Python floats is
+    `np.isfinite(...).all()`, in value and type, for any dtype and size."""
+    from lagjax._integrate.taylor_heyoka import all_finite
+
+    for values in ([0.5, -2.0], [np.nan, 1.0], [1.0, -np.inf], [], [1e30, 1e-40]):
+        for dtype in (np.float64, np.float32, np.longdouble):
+            for shape in ((-1,), (1, -1)):
+                ys = np.array(values, dtype).reshape(shape)
+                expected = np.isfinite(ys).all()
+                assert type(all_finite(ys)) is type(expected)
+                assert all_finite(ys) == expected
+    big = np.zeros(1000)
+    assert all_finite(big) and not all_finite(np.append(big, np.nan))

@@ -189,22 +189,34 @@ def _statistics(rows: Rows, structure: Any, max_steps: int) -> dict[str, Any]:
 
 def _one_member_statistics(rows: Rows, max_steps: int) -> dict[str, Any]:
     """`run_statistics` of one concrete member's run without events, the same
-    values and types, from fewer NumPy calls: no event, no save after one (no
-    t = inf to exempt), and the code one integer. After a heyoka run each NumPy
-    function's first call is cold (caches and predictors full of heyoka's loop):
-    the general path's cost 0.18 ms a call there, a twentieth of the double
-    pendulum's run to t = 100."""
-    code = int(rows.codes)
+    values and types, on Python values: no event, no
+    save after one (no t = inf to exempt), the code one integer, and a small
+    state's finiteness read from its floats. After a heyoka run each NumPy
+    function's first call is cold (caches and predictors full of heyoka's loop,
+    10–100 µs a call): the general path cost 0.18 ms a call there, a twentieth
+    of the double pendulum's run to t = 100."""
+    code, steps = int(rows.codes), rows.num_steps
     return {
-        "num_steps": rows.num_steps,
-        "num_accepted_steps": rows.num_steps,
-        "num_rejected_steps": 0 * rows.num_steps,
+        "num_steps": steps,
+        "num_accepted_steps": steps,
+        "num_rejected_steps": steps.dtype.type(0),  # the type of 0 * steps
         "max_steps": max_steps,
-        "finite": np.isfinite(rows.ys).all(),
+        "finite": all_finite(rows.ys),
         "succeeded": np.bool_(code == SUCCESS or code >= FIRST_EVENT),
-        "result": _as_result(rows.codes),
+        "result": _result_of(code),
         "heyoka_status": outcome_name(code),
     }
+
+
+def all_finite(ys: np.ndarray) -> np.bool_:
+    """`np.isfinite(ys).all()`; for a few float64 or float32 values, from their
+    Python floats (one NumPy call, not two ufuncs)."""
+    if ys.size <= _FEW and ys.dtype.type in (np.float64, np.float32):
+        return np.bool_(all(map(math.isfinite, ys.ravel().tolist())))
+    return np.isfinite(ys).all()
+
+
+_FEW = 64  # values whose check in Python stays under a cold ufunc's cost
 
 
 _RESULTS = {
@@ -218,10 +230,7 @@ def _as_result(codes: Any) -> Any:
     """Outcome codes as `diffrax.RESULTS`: by look-up for one concrete code (no
     JAX dispatch), by `where` for traced or batched codes."""
     if isinstance(codes, np.ndarray) and codes.ndim == 0:
-        code = int(codes)
-        if code >= FIRST_EVENT:
-            return diffrax.RESULTS.event_occurred
-        return _RESULTS.get(code, diffrax.RESULTS.internal_error)
+        return _result_of(int(codes))
     where = diffrax.RESULTS.where
     return where(
         (codes == SUCCESS),
@@ -242,8 +251,21 @@ def _as_result(codes: Any) -> Any:
     )
 
 
+def _result_of(code: int) -> Any:
+    """One outcome code's `diffrax.RESULTS`."""
+    if code >= FIRST_EVENT:
+        return diffrax.RESULTS.event_occurred
+    result = _RESULTS.get(code)
+    return diffrax.RESULTS.internal_error if result is None else result
+
+
 def bad_times(rows: Rows) -> Any:
-    return rows.codes == BAD_TIMES
+    """Where the save times were refused; for one concrete code, compared in
+    Python (the same `np.bool_`)."""
+    codes = rows.codes
+    if isinstance(codes, np.ndarray) and codes.ndim == 0:
+        return np.bool_(int(codes) == BAD_TIMES)
+    return codes == BAD_TIMES
 
 
 def _shapes(args: Any) -> Any:

@@ -25,9 +25,9 @@ values:
 
 | check | on a repeat |
 |---|---|
-| system, solver, `max_steps`, tolerances and their resolution, y0's pair, types and shapes, a constrained system refused | kept: same structure, same verdict |
+| system, solver, `max_steps`, tolerances and their resolution, y0's pair, types and shapes (the default `checked_state_pair`), a constrained system refused | kept: same structure, same verdict |
 | t0, t1 finite, distinct, resolvable in the working precision | run again (skipped for the last (t0, t1) that passed) |
-| `ts` sorted inside [t0, t1]; `args` free of NaN; `y0` finite; the system's own checks of `y0` (`checked_state_pair`, `check_start`) | run again, with the system's methods fetched once |
+| `ts` sorted inside [t0, t1]; `args` free of NaN; `y0` finite; the system's own checks of `y0` (`check_start`, a `checked_state_pair` of its own) | run again, the system's methods bound once |
 
 A check that fails on a repeat hands the call to the first-call path, which
 raises its error the same way; so does anything a repeat does not cover: a
@@ -37,12 +37,22 @@ its identity does not fix its equations). The run itself is heyoka's: one
 `propagate_until` to t1 (`HeyokaRunner.final_state`), or the runner's grid for
 `ts`; the `Trajectory` is the first-call path's (`member_trajectory`).
 
+After heyoka's run every NumPy, pytree or equinox call on the way out is cold
+(its code and data evicted by heyoka's loop: 10–100 µs a call where a warm one
+costs 1–10 µs), and so is every call before the next run: a repeat of the
+common call — `y0` a tuple of NumPy arrays, `args` None — makes few of them
+(its key without a pytree flatten, y0 flattened by one `concatenate`, the
+statistics of one member on Python values). The double pendulum to t = 100 at
+tol 1e-12: 0.93–0.96× heyoka's own time, from 1.03–1.08×
+(`benchmarks/heyoka_peer.py`'s problem, one core).
+
 References: F. Biscani & D. Izzo, MNRAS 504 (2021) 2614 (heyoka); the equinox
 documentation, `equinox.Module` (bound methods as Modules).
 """
 
 from __future__ import annotations
 
+import functools
 import numbers
 from collections import OrderedDict
 from collections.abc import Callable, Hashable
@@ -53,6 +63,7 @@ import numpy as np
 from jax.core import Tracer
 
 from lagjax._core.precision import working_dtype
+from lagjax._core.system import AbstractSystem
 from lagjax._integrate.checks.initial_state import check_initial_state
 from lagjax._integrate.checks.inputs import (
     check_args_not_nan,
@@ -63,6 +74,7 @@ from lagjax._integrate.checks.inputs import (
 )
 from lagjax._integrate.checks.late_failure import raise_if_failed
 from lagjax._integrate.taylor_heyoka import (
+    all_finite,
     concrete_pars,
     heyoka_member,
     heyoka_runner,
@@ -122,11 +134,14 @@ class _Repeat:
         max_steps: int,
     ) -> None:  # fmt: skip
         self.system = system  # kept alive: its id is part of the key
-        # equinox builds a bound-method Module (flattening the system) on each
-        # access of a method: fetched once here
-        self.checked_state_pair: Callable = system.checked_state_pair
-        self.resolve: Callable = system.resolve
-        self.check_start: Callable = resolved.check_start
+        # the default pair check reads only y0's structure and shapes, which the
+        # key fixes: its verdict is kept (it returns the pair as given)
+        default_pair = type(system).checked_state_pair is _DEFAULT_PAIR_CHECK
+        self.checked_state_pair: Callable | None = (
+            None if default_pair else _method(system, "checked_state_pair")
+        )
+        self.resolve: Callable = _method(system, "resolve")
+        self.check_start: Callable = _method(resolved, "check_start")
         self.dtype, self.field, self.runner = dtype, field, runner
         self.integrator = runner.integrator() if runner.final_only else None
         self.max_steps = max_steps
@@ -183,16 +198,40 @@ class _Repeat:
         if args is not None:  # None holds no NaN (and its check's first call is cold)
             check_args_not_nan(args)
         warn_float64_without_x64(y0)
-        pair = self.checked_state_pair(*y0)
-        leaves, treedef = jax.tree_util.tree_flatten(pair)
-        leaves = [np.asarray(x, dtype=self.dtype) for x in leaves]
-        flat0 = np.concatenate([np.ravel(x) for x in leaves])
-        if not np.isfinite(flat0).all():
+        check_pair = self.checked_state_pair
+        pair = tuple(y0) if check_pair is None else check_pair(*y0)
+        start, flat0 = _start_and_flat(pair, self.dtype)
+        if not all_finite(flat0):
             return None
         system, args = self.resolve(args)
-        self.check_start(jax.tree_util.tree_unflatten(treedef, leaves), t0, args,
-                         self.dtype)  # fmt: skip
+        self.check_start(start, t0, args, self.dtype)
         return flat0, system, args
+
+
+def _method(module: Any, name: str) -> Callable:
+    """`module.name` as its function bound by `functools.partial`: equinox's
+    bound-method Module reads its own fields through a Python
+    `__getattribute__` on every call (three calls a repeat, cold after a
+    heyoka run)."""
+    return functools.partial(getattr(type(module), name), module)
+
+
+_DEFAULT_PAIR_CHECK = AbstractSystem.checked_state_pair
+
+
+def _start_and_flat(pair: Any, dtype: np.dtype) -> tuple[Any, np.ndarray]:
+    """y0's checked pair with its leaves in `dtype`, and flat. A tuple of NumPy
+    arrays already in `dtype` is its own converted pair (`np.asarray` returns
+    each array): one `concatenate`, no pytree flatten or unflatten, each a
+    cold call after a heyoka run."""
+    if type(pair) is tuple and all(
+        type(x) is np.ndarray and x.dtype == dtype for x in pair
+    ):
+        return pair, np.concatenate(pair, axis=None)
+    leaves, treedef = jax.tree_util.tree_flatten(pair)
+    leaves = [np.asarray(x, dtype=dtype) for x in leaves]
+    flat0 = np.concatenate([np.ravel(x) for x in leaves])
+    return jax.tree_util.tree_unflatten(treedef, leaves), flat0
 
 
 _REPEATS: OrderedDict[Hashable, _Repeat] = OrderedDict()
@@ -202,20 +241,50 @@ def _structure(system, y0, t0, t1, solver, ts, args, rtol, atol, max_steps):
     """The key of a call's structure (module docstring), or None for a call a
     repeat does not cover: traced or non-numeric times, traced leaves (and,
     found on look-up, anything unhashable)."""
-    if not all(_real_number(t) for t in (t0, t1)) or isinstance(ts, Tracer):
+    if not (_real_number(t0) and _real_number(t1)) or isinstance(ts, Tracer):
         return None
-    y0_leaves, y0_tree = jax.tree_util.tree_flatten(y0)
-    args_leaves, args_tree = jax.tree_util.tree_flatten(args)
-    if any(isinstance(x, Tracer) for x in (*y0_leaves, *args_leaves)):
+    y0_key = _plain_tuple(y0)
+    if y0_key is None:
+        y0_key = _tree_key(y0)
+    args_key = None if args is None else _tree_key(args)
+    if y0_key is None or (args_key is None and args is not None):
         return None
     return (
-        id(system), y0_tree, _leaf_types(y0_leaves), args_tree,
-        _leaf_types(args_leaves), ts is None, rtol, atol, max_steps,
+        id(system), y0_key, args_key, ts is None, rtol, atol, max_steps,
         _solver_fields(solver), bool(jax.config.read("jax_enable_x64")),
     )  # fmt: skip
 
 
+def _tree_key(tree: Any) -> tuple | None:
+    """A pytree's structure and leaf types, or None for traced leaves."""
+    leaves, structure = jax.tree_util.tree_flatten(tree)
+    if any(isinstance(x, Tracer) for x in leaves):
+        return None
+    return structure, _leaf_types(leaves)
+
+
+def _plain_tuple(y0: Any) -> tuple | None:
+    """`_tree_key` of a plain tuple of NumPy arrays and floats (the common
+    `(q0, qdot0)`) without a pytree flatten, a cold call after a heyoka run:
+    its length fixes its structure. None for any other y0."""
+    if type(y0) is not tuple:
+        return None
+    types = []
+    for x in y0:
+        kind = type(x)
+        if kind is np.ndarray:
+            types.append((kind, x.shape, x.dtype))
+        elif kind is float:
+            types.append((kind, (), None))  # as `_leaf_types` has a float
+        else:
+            return None
+    return "tuple", tuple(types)
+
+
 def _real_number(value: Any) -> bool:
+    kind = type(value)
+    if kind is float or kind is int:
+        return True
     return isinstance(value, numbers.Real) and not isinstance(value, bool)
 
 
