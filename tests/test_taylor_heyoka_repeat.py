@@ -247,3 +247,30 @@ def test_all_finite_equals_numpy():
                 assert all_finite(ys) == expected
     big = np.zeros(1000)
     assert all_finite(big) and not all_finite(np.append(big, np.nan))
+
+
+def test_a_heyoka_trajectory_is_the_one_its_init_builds():
+    """A heyoka run's `Trajectory` is built as equinox's unflatten builds a
+    Module (each field set on a new object, no `__init__`): the same fields,
+    values and tree structure as `Trajectory(...)`."""
+    import diffrax as dfx
+    import jax
+
+    from lagjax._integrate.taylor_heyoka import SOLVER_NAME, _trajectory
+    from lagjax.trajectory import Trajectory
+
+    ts, ys = np.array([2.0]), (np.ones((1, 2)), np.zeros((1, 2)))
+    stats = {"num_steps": np.asarray(7), "finite": np.True_}
+    result = dfx.RESULTS.successful
+    built = _trajectory(ts, ys, PENDULUM, {"g": 1.0}, stats, result)
+    init = Trajectory(
+        ts=ts,  # pyright: ignore[reportArgumentType]  (NumPy, as on the CPU route)
+        ys=ys, system=PENDULUM, args={"g": 1.0}, run_stats=stats, result=result,
+        solver_name=SOLVER_NAME,
+    )  # fmt: skip
+    assert type(built) is Trajectory
+    assert vars(built).keys() == vars(init).keys()
+    assert jax.tree_util.tree_structure(built) == jax.tree_util.tree_structure(init)
+    for a, b in zip(jax.tree_util.tree_leaves(built), jax.tree_util.tree_leaves(init)):
+        assert a is b
+    assert built.stats == {"solver": SOLVER_NAME, **stats} and built.q is ys[0]

@@ -145,6 +145,7 @@ class _Repeat:
         self.dtype, self.field, self.runner = dtype, field, runner
         self.integrator = runner.integrator() if runner.final_only else None
         self.max_steps = max_steps
+        self.no_pars = np.zeros(0, dtype)  # the parameters of `args` None
         self.times: tuple[Any, Any] | None = None  # the last (t0, t1) that passed
 
     @classmethod
@@ -175,7 +176,7 @@ class _Repeat:
             return None
         flat0, system, args = checked
         if ts is None:  # the times in the run's dtype, as `heyoka_member` has them
-            pars = concrete_pars(args, self.dtype)
+            pars = self.no_pars if args is None else concrete_pars(args, self.dtype)
             start, end = self.dtype.type(t0), self.dtype.type(t1)
             rows = self.runner.final_state(self.integrator, flat0, pars, start, end)
         else:
