@@ -112,6 +112,7 @@ def test_orbit_closes_after_one_period(form):
         assert np.allclose(trajectories.q[:, -1, 1], 2 * np.pi, rtol=0, atol=1e-8)
 
 
+@pytest.mark.integration  # compile-heavy (10–15 s): CI runs it in its integration step
 def test_cartesian_and_polar_forms_agree():
     _, _, from_hamiltonian, _ = eccentricity_sweep(KeplerCartesian)
     _, _, from_lagrangian, _ = eccentricity_sweep(KeplerPolar)

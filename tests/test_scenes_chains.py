@@ -130,6 +130,7 @@ def oscillatory_energies(scene, start, run):
     return each, jnp.sum(each, axis=-1)
 
 
+@pytest.mark.integration  # compile-heavy (10–15 s): CI runs it in its integration step
 def test_fermi_pasta_ulam_stiff_springs_trade_energy_but_keep_its_sum():
     # A near-exact run (Yoshida6, ωh = 0.25; H kept to 5e-7) shows HLW's
     # Fig. I.5.2: by t = 150 the first stiff spring has handed nearly all its
