@@ -139,17 +139,18 @@ class HeyokaRunner:
         short run. Only for a `final_only` runner without events."""
         if self.events or not self.final_only:
             raise ValueError("final_state runs to t1 without events; use the call")
+        state = ta.state  # a view of heyoka's state: one pybind11 call, not two
         ta.time = self.fp_type(t0)
-        ta.state[:] = y0
+        state[:] = y0
         if len(pars):
             ta.pars[:] = pars
         outcome, _, _, steps, *_ = ta.propagate_until(
             self.fp_type(t1), max_steps=self.max_steps
         )
         code = _code(outcome)
-        state = ta.state.copy() if code == SUCCESS else np.full_like(ta.state, np.nan)
+        state = state.copy() if code == SUCCESS else np.full_like(state, np.nan)
         return Rows(
-            np.full(1, t1, self.fp_type),
+            np.array((t1,), self.fp_type),  # one C call (np.full's is Python)
             state[None],
             np.asarray(steps, np.int64),
             np.asarray(code, np.int32),
