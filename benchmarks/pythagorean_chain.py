@@ -84,13 +84,9 @@ import jax
 import numpy as np
 
 import lagjax as lj
-from benchmarks.close_encounters import (
-    heyoka_run,
-    interleaved,
-    measures,
-    rebound_run,
-)
+from benchmarks.close_encounters import interleaved, measures
 from benchmarks.pythagorean_jacobi import jacobi_run
+from benchmarks.pythagorean_peers import heyoka_run, rebound_run
 from lagjax.scenes.pythagorean import PythagoreanThreeBody
 
 COMPARE_AT = 30
