@@ -250,9 +250,8 @@ def test_all_finite_equals_numpy():
 
 
 def test_a_heyoka_trajectory_is_the_one_its_init_builds():
-    """A heyoka run's `Trajectory` is built as equinox's unflatten builds a
-    Module (each field set on a new object, no `__init__`): the same fields,
-    values and tree structure as `Trajectory(...)`."""
+    """A heyoka run's `Trajectory` is built by `tree_unflatten`, without
+    `__init__`: the same fields, values and tree structure as `Trajectory(...)`."""
     import diffrax as dfx
     import jax
 

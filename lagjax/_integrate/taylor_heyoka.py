@@ -24,7 +24,7 @@ on the Taylor polynomial); the diffrax documentation, `diffrax.Event`.
 
 from __future__ import annotations
 
-import dataclasses
+import functools
 import math
 from typing import Any
 
@@ -130,24 +130,31 @@ def rows_as_states(layout: tuple, flat_ys: np.ndarray) -> Any:
     return jax.tree_util.tree_unflatten(treedef, leaves)
 
 
+_TRAJECTORY_FIELDS = ("ts", "ys", "system", "args", "run_stats", "result")
+
+
+@functools.cache
+def _trajectory_structure() -> tuple[Any, list[int]]:
+    """A heyoka `Trajectory`'s tree structure with each field a leaf, and which
+    field each leaf is (`_TRAJECTORY_FIELDS`; dense output last)."""
+    marks: dict[str, Any] = {name: i for i, name in enumerate(_TRAJECTORY_FIELDS)}
+    marked = Trajectory(
+        solver_name=SOLVER_NAME, dense_output=len(_TRAJECTORY_FIELDS), **marks
+    )
+    leaves, structure = jax.tree_util.tree_flatten(marked)
+    return structure, leaves
+
+
 def _trajectory(ts, ys, system, args, stats, result) -> Trajectory:
-    """`Trajectory(...)` of a heyoka run, built as equinox's unflatten builds a
-    Module (what `tree_unflatten` runs for a jitted function's output): a new
-    object, each field set. Equinox's `__init__` flattens every field, the
-    system's functions included, for its checks — 0.2 ms a call, a tenth of a
-    2 ms heyoka run — and a Trajectory has no invariant to check; the pytree
-    call is one of the cold ones after a heyoka run."""
-    values = {
-        "ts": ts, "ys": ys, "system": system, "args": args, "run_stats": stats,
-        "result": result, "solver_name": SOLVER_NAME, "dense_output": None,
-    }  # fmt: skip
-    trajectory = object.__new__(Trajectory)
-    for name in _TRAJECTORY_FIELDS:  # a field not named above: a KeyError here
-        object.__setattr__(trajectory, name, values[name])
-    return trajectory
-
-
-_TRAJECTORY_FIELDS = tuple(field.name for field in dataclasses.fields(Trajectory))
+    """`Trajectory(...)` of a heyoka run, built the way JAX rebuilds a jitted
+    function's output (`tree_unflatten`): equinox's `__init__` flattens every
+    field, the system's functions included, for its checks — 0.2 ms a call, a
+    tenth of a 2 ms heyoka run — and a Trajectory has no invariant to check.
+    (Setting the fields on a bare object, as equinox's unflatten does inside,
+    saved another 25 µs of a 4 ms run: not worth leaning on equinox's internals.)"""
+    structure, fields = _trajectory_structure()
+    values = (ts, ys, system, args, stats, result, None)
+    return jax.tree_util.tree_unflatten(structure, [values[i] for i in fields])
 
 
 def run_statistics(rows: Rows, structure: Any, max_steps: int) -> dict[str, Any]:
