@@ -42,11 +42,12 @@ After heyoka's run every NumPy, pytree or equinox call on the way out is cold
 costs 1–10 µs), and so is every call before the next run: a repeat of the
 common call — `y0` a tuple of NumPy arrays, `args` None — makes few of them
 (its key without a pytree flatten, y0 flattened by one `concatenate`, the
-statistics of one member on Python values, the `Trajectory` set field by
-field). The double pendulum to t = 100 at tol 1e-12, one core, each call after
-a heyoka run: 340–480 µs of Python around `propagate_until`, from 580–700 µs;
-0.95–0.99× heyoka's own time, from 1.03–1.08× (the translated integrator alone:
-0.85–0.86×).
+statistics of one member on Python values). The double pendulum to t = 100 at
+tol 1e-12, one core, each call after a heyoka run: 340–480 µs of Python around
+`propagate_until`, from 580–700 µs; 0.95–0.99× heyoka's own time, from
+1.03–1.08× (the translated integrator alone: 0.85–0.86×). Those figures had the
+`Trajectory`'s fields set on a bare object (25 µs less), since taken back for
+the public `tree_unflatten` (`taylor_heyoka._trajectory`).
 
 References: F. Biscani & D. Izzo, MNRAS 504 (2021) 2614 (heyoka); the equinox
 documentation, `equinox.Module` (bound methods as Modules).
