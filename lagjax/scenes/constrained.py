@@ -263,7 +263,8 @@ def _disk_frame(q):
     _, _, tilt, heading, _ = q
     along = jnp.stack([jnp.cos(heading), jnp.sin(heading), 0.0])
     across = jnp.stack([-jnp.sin(heading), jnp.cos(heading), 0.0])
-    vertical = jnp.array([0.0, 0.0, 1.0])
+    # in q's precision: a float64 constant would lift a float32 run to float64
+    vertical = jnp.array([0.0, 0.0, 1.0], dtype=jnp.result_type(tilt))
     axis = jnp.cos(tilt) * across + jnp.sin(tilt) * vertical
     up = -jnp.sin(tilt) * across + jnp.cos(tilt) * vertical
     return along, axis, up
