@@ -30,7 +30,6 @@ from typing import Any
 import jax
 import jax.extend as jex
 import jax.numpy as jnp
-import numpy as np
 
 import lagjax.taylor.recurrences as rec
 
@@ -57,13 +56,6 @@ AFFINE = frozenset(
 )
 PIECEWISE_CONSTANT = frozenset({"sign", "floor", "ceil", "round", "stop_gradient"})
 BRANCHES = frozenset({"abs", "max", "min"})
-
-
-def _literal_is(builder: Builder, index: int, value: float) -> bool:
-    const = builder.constants.get(index)
-    return (
-        const is not None and np.shape(const) == () and bool(np.asarray(const) == value)
-    )
 
 
 def _integer_power(builder: Builder, x: int, n: int, aval: Any) -> int:
@@ -98,7 +90,7 @@ def _series_rule(builder: Builder, eqn: Any, ins: list[int]) -> tuple[int, ...]:
     key = (name, tuple(ins), frozen_params(params))
     key = None if key[2] is None else key
     if name == "mul" or name == "dot_general":
-        one = [i for i, f in zip(ins, flags) if not f and _literal_is(builder, i, 1.0)]
+        one = [i for i, f in zip(ins, flags) if not f and builder.constant_is(i, 1.0)]
         if (
             name == "mul"
             and one
@@ -120,13 +112,13 @@ def _series_rule(builder: Builder, eqn: Any, ins: list[int]) -> tuple[int, ...]:
             if not flags[1]
             else rec.Quotient(primitive=prim, params=params, series=flags)
         )
-    elif name in ("add", "sub") and not flags[1] and _literal_is(builder, ins[1], 0.0):
+    elif name in ("add", "sub") and not flags[1] and builder.constant_is(ins[1], 0.0):
         return (
             (ins[0],)
             if avals[0].shape == builder.avals[ins[0]].shape
             else _affine(builder, eqn, ins, key)
         )
-    elif name == "add" and not flags[0] and _literal_is(builder, ins[0], 0.0):
+    elif name == "add" and not flags[0] and builder.constant_is(ins[0], 0.0):
         return (
             (ins[1],)
             if avals[0].shape == builder.avals[ins[1]].shape

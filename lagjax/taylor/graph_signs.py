@@ -7,7 +7,7 @@ then scalings by them, and negations that autodiff writes around products
 twice). Here, as `graph` lowers each operation:
 
 - an operation whose inputs are all constants is evaluated once, at lowering,
-  and becomes a constant (so `_literal_is` sees the 1s and −1s it makes);
+  and becomes a constant (so `Builder.constant_is` sees the 1s and −1s it makes);
 - x·(−1) is −x; −(−x) is x;
 - a product or quotient of negated factors is the negation of the product of the
   factors, so equal products meet in the common-subexpression table;
@@ -157,12 +157,7 @@ def rewrite(
         return (signs.linear(name, ins[0], ins[1], aval),)
     if name == "mul":  # one fixed factor
         fixed, series = (ins[0], ins[1]) if flags[1] else (ins[1], ins[0])
-        constant = builder.constants.get(fixed)
-        if (
-            constant is not None
-            and np.shape(constant) == ()
-            and np.asarray(constant) == -1
-        ):
+        if builder.constant_is(fixed, -1.0):
             return (signs.negate(series),)
         sign, base = signs.split(series)
         scaled = [fixed, base] if flags[1] else [base, fixed]

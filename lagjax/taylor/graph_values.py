@@ -123,6 +123,16 @@ class Builder:
             self.seen[key] = outs
         return outs
 
+    def constant_is(self, index: int, value: float) -> bool:
+        """Whether value `index` is the scalar constant `value` (a literal, or
+        one folded at lowering)."""
+        const = self.constants.get(index)
+        return (
+            const is not None
+            and np.shape(const) == ()
+            and bool(np.asarray(const) == value)
+        )
+
     def flags(self, ins) -> tuple[bool, ...]:
         return tuple(i in self.series for i in ins)
 
