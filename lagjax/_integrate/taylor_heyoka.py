@@ -191,9 +191,9 @@ def _statistics(rows: Rows, structure: Any, max_steps: int) -> dict[str, Any]:
 
 def _one_member_statistics(rows: Rows, max_steps: int) -> dict[str, Any]:
     """`run_statistics` of one concrete member's run without events, the same
-    values and types, on Python values: no event, no
-    save after one (no t = inf to exempt), the code one integer, and a small
-    state's finiteness read from its floats. After a heyoka run each NumPy
+    values and types, on Python values: no event, no save after one (no t = inf
+    to exempt), the code one integer, and a small state's finiteness read from
+    its floats. After a heyoka run each NumPy
     function's first call is cold (caches and predictors full of heyoka's loop,
     10–100 µs a call): the general path cost 0.18 ms a call there, a twentieth
     of the double pendulum's run to t = 100."""
