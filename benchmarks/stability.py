@@ -100,7 +100,8 @@ def build_cases(quick: bool) -> list[Study]:
 
 def _print_row(row: dict) -> None:
     print(f"{row['case']:44s} {row['method']:34s} {row['outcome']:9s} "
-          f"{row['error']:8.1e} {row['energy_error']:8.1e} {row['run_s']:9.2e}  "
+          f"{row['error']:8.1e} {row['energy_error']:8.1e} {row['run_s']:9.2e} "
+          f"{row['steps']:8.0f}  "
           f"{row['measure']}{row['reason'][:110]}", flush=True)  # fmt: skip
 
 
@@ -113,7 +114,7 @@ def main(argv: list[str] | None = None) -> int:
     timing = dict(repeats=3, max_seconds=0.3 if options.quick else 2.0)
     rows = []
     print(f"{'case':44s} {'method':34s} {'outcome':9s} {'error':>8s} {'energy':>8s} "
-          f"{'run s':>9s}  measure / reason")  # fmt: skip
+          f"{'run s':>9s} {'steps':>8s}  measure / reason")  # fmt: skip
     for case in build_cases(options.quick):
         for row in case.rows(timing):
             rows.append(row)

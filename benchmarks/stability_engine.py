@@ -11,6 +11,8 @@ Every row of the suite has the same keys (`ROW_KEYS`), whatever produced it:
   exponent's target quantity — each case's docstring says which);
 - `energy_error`: max relative energy error along the run (NaN where not measured);
 - `run_s`, `compile_s`: a warm run and the compilation (`diagnostics.time_run`);
+- `steps`: the steps the solver took, rejected ones included (NaN where a study
+  does not count them) — the work, free of the machine's load, that tests compare;
 - `measure`: what was measured, in words and numbers, where a final-state error
   does not say it all (a rate, a growth exponent, a Lyapunov exponent);
 - `reason`: why a run was refused.
@@ -37,7 +39,7 @@ import lagjax as lj
 from lagjax import diagnostics
 
 ROW_KEYS = ("case", "method", "outcome", "error", "energy_error", "run_s",
-            "compile_s", "measure", "reason")  # fmt: skip
+            "compile_s", "steps", "measure", "reason")  # fmt: skip
 ENERGY_SAMPLES = 100  # stratified random save times (diagnostics.sample_times)
 
 
@@ -60,6 +62,7 @@ class Measured(NamedTuple):
     energy_error: float = math.nan
     measure: str = ""
     score: float | None = None
+    steps: float = math.nan
 
 
 def judged_row(
@@ -142,13 +145,14 @@ def reference(case: Case) -> np.ndarray:
     if case.expected is not None:
         return np.asarray(case.expected)
     tight = Attempt("reference", diffrax.Dopri8(), rtol=1e-12, max_steps=10**7)
-    final = jax.jit(lambda y0: _final(case, tight, y0))(case.y0)
+    final, _ = jax.jit(lambda y0: _final_and_steps(case, tight, y0))(case.y0)
     return np.asarray(final)
 
 
-def _final(case: Case, attempt: Attempt, y0: Any) -> jax.Array:
+def _final_and_steps(case: Case, attempt: Attempt, y0: Any):
     trajectory = _simulate(case, attempt, y0)
-    return case.comparable(trajectory.q[-1], trajectory.qdot[-1])
+    final = case.comparable(trajectory.q[-1], trajectory.qdot[-1])
+    return final, trajectory.stats["num_steps"]
 
 
 def energy_error(case: Case, attempt: Attempt) -> float:
@@ -164,10 +168,12 @@ def energy_error(case: Case, attempt: Attempt) -> float:
 def _measure(case: Case, attempt: Attempt, expected: np.ndarray, timing) -> Measured:
     if attempt.route is not None:
         timed = diagnostics.time_run(attempt.route, **timing)
+        final, steps = timed.output, math.nan
     else:
         timed = diagnostics.time_run(
-            lambda y0: _final(case, attempt, y0), case.y0, **timing
+            lambda y0: _final_and_steps(case, attempt, y0), case.y0, **timing
         )
-    error = diagnostics.final_state_error(timed.output, expected)
+        final, steps = timed.output[0], float(timed.output[1])
+    error = diagnostics.final_state_error(final, expected)
     return Measured(error, timed.run_seconds, timed.compile_seconds,
-                    energy_error(case, attempt))  # fmt: skip
+                    energy_error(case, attempt), steps=steps)  # fmt: skip

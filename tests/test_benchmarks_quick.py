@@ -180,7 +180,10 @@ def test_implicit_method_wins_on_the_overdamped_oscillator(results):
     implicit = rows[(mild, "Kvaerno5 (implicit, L-stable)")]
     explicit = rows[(mild, "Tsit5 (explicit)")]
     assert implicit["outcome"] == explicit["outcome"] == "accurate"
-    assert implicit["run_s"] < explicit["run_s"]
+    # The work, not the clock: Tsit5's step is held to |hλ| ≲ 3.3 by the fast
+    # rate λ ≈ −200 (≳ 6000 steps over t = 100); the L-stable method follows the
+    # slow mode. A run-time comparison failed CI on a loaded machine (2.4 vs 2.1 ms).
+    assert 10 * implicit["steps"] < explicit["steps"], (implicit, explicit)
     severe = "overdamped oscillator ζ = 10000"
     assert rows[(severe, "Kvaerno5 (implicit, L-stable)")]["outcome"] == "accurate"
     assert rows[(severe, "Tsit5 (explicit)")]["outcome"] != "accurate"
