@@ -17,9 +17,18 @@ from typing import Any
 
 import jax.extend as jex
 
+from lagjax._linalg.marked_solves import MARKED_SOLVE_NAME
+
 # Primitives that call a closed jaxpr of their own (`jax.jit` inside the function,
 # jnp's functions): evaluated by entering that jaxpr.
 CALLS = frozenset({"pjit", "jit", "closed_call"})
+
+
+def entered(eqn: Any) -> bool:
+    """Whether the walk enters `eqn`'s jaxpr: a call, except a marked solve
+    (`marked_solves`), which goes to the rule as one equation."""
+    return eqn.primitive.name in CALLS and eqn.params.get("name") != MARKED_SOLVE_NAME
+
 
 Rule = Callable[[Any, list[Any]], Sequence[Any]]
 
@@ -52,7 +61,7 @@ def evaluate_jaxpr(
     env.update(zip(jaxpr.invars, inputs))
     for eqn in jaxpr.eqns:
         operands = [read(v) for v in eqn.invars]
-        if eqn.primitive.name in CALLS:
+        if entered(eqn):
             closed = eqn.params["jaxpr"]
             results = evaluate_jaxpr(
                 closed.jaxpr,
@@ -71,7 +80,7 @@ def evaluate_jaxpr(
 def any_equation(jaxpr: Any, test: Callable[[Any], bool]) -> bool:
     """Whether `test(eqn)` holds for an equation of `jaxpr` or of a call in it."""
     for eqn in jaxpr.eqns:
-        if eqn.primitive.name in CALLS:
+        if entered(eqn):
             if any_equation(eqn.params["jaxpr"].jaxpr, test):
                 return True
         elif test(eqn):

@@ -28,11 +28,17 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from lagjax._linalg.jaxpr_interpreter import CALLS, evaluate_jaxpr
+from lagjax._linalg.jaxpr_interpreter import entered, evaluate_jaxpr
+from lagjax._linalg.marked_solves import MARKED_SOLVE_NAME
 from lagjax._linalg.object_arrays import objects_from_scalars
 from lagjax._linalg.object_arrays import to_objects as _to_objects
 from lagjax._linalg.scalarized_branches import scalar_cond
 from lagjax._linalg.structural_objects import MULTIPLE, STRUCTURAL, structural
+from lagjax._linalg.unrolled_ldl import (
+    ldl_factor_unrolled,
+    ldl_solve_unrolled,
+    pivots_sound,
+)
 
 MAX_SCALARIZED_SIZE = 64
 
@@ -110,7 +116,10 @@ class _Unsupported(Exception):
 def _check(jaxpr: Any, branches: bool = False) -> None:
     for eqn in jaxpr.eqns:
         name = eqn.primitive.name
-        if name in CALLS:
+        if eqn.params.get("name") == MARKED_SOLVE_NAME:
+            if len(eqn.invars[1].aval.shape) != 1:
+                raise _Unsupported("a marked solve with several right-hand sides")
+        elif entered(eqn):
             _check(eqn.params["jaxpr"].jaxpr, branches)
         elif name == "cond" and branches:
             pass  # each branch is judged on its own (`scalarized_branches`)
@@ -144,6 +153,8 @@ def _scalarizable(jaxpr: Any) -> bool:
 def _scalar_rule(eqn: Any, operands: list[np.ndarray]) -> list[np.ndarray]:
     """One equation on object arrays of scalars (`evaluate_jaxpr`'s rule)."""
     name = eqn.primitive.name
+    if eqn.params.get("name") == MARKED_SOLVE_NAME:
+        return _scalar_marked_solve(*operands)
     if name == "cond":  # only where the caller asked for branches (`_check`)
         return scalar_cond(eqn, operands, _scalarizable, _evaluate)
     if name == "custom_vmap_call":  # likewise
@@ -158,6 +169,20 @@ def _scalar_rule(eqn: Any, operands: list[np.ndarray]) -> list[np.ndarray]:
         results = structural(eqn, operands)
         results = results if name in MULTIPLE else [results]
     return [np.asarray(value, dtype=object) for value in results]
+
+
+def _scalar_marked_solve(m: np.ndarray, rhs: np.ndarray) -> list[np.ndarray]:
+    """A marked solve (`marked_solves`, in a trace for the Taylor graph) in
+    scalars: unrolled LDLᵀ without pivoting, so every operation is a scalar
+    product, quotient or difference with its recurrence. M not positive
+    definite, or nearly singular, sets the singular flag (the caller turns it
+    into NaN or an error) instead of falling back to pivoted LU as
+    `solve_unrolled_symmetric` does: LU has no recurrence."""
+    n = rhs.shape[0]
+    factor = ldl_factor_unrolled([[m[i, j] for j in range(n)] for i in range(n)])
+    x = ldl_solve_unrolled(factor, list(rhs))
+    singular = jnp.logical_not(pivots_sound(factor))
+    return [objects_from_scalars(x), _to_objects(singular)]
 
 
 def _evaluate(jaxpr: Any, consts: Sequence[Any], inputs: Sequence[np.ndarray]) -> list:

@@ -41,6 +41,7 @@ from lagjax._linalg.loop_factorizations import (
     solve_by_cholesky_factor,
     solve_by_pivoted_lu,
 )
+from lagjax._linalg.marked_solves import marked_solve, solves_marked
 from lagjax._linalg.unrolled_ldl import (
     SINGULAR_EPS_FACTOR,
     ldl_factor_unrolled,
@@ -304,9 +305,13 @@ def solve_symmetric_system(
     trajectories 1.48 / 1.71 / 1.75× with the branch, 0.95 / 1.47 / 1.76× by LU
     alone; one trajectory 1.71 / 1.81 / 1.75× and 1.58 / 1.54 / 2.11× (a single
     LU is slow there; one trajectory runs about 20× faster on the CPU anyway).
+    Under `marked_solves.marking_solves` (a trace for the Taylor graph) the solve
+    is one named call of `solve_dense`, which that graph reads as one operation.
     Returns `(x, singular)`.
     """
     m, rhs = system()
+    if solves_marked():
+        return marked_solve(solve_dense, m, rhs)
 
     def cholesky_with_lu_fallback(m, rhs):
         x, sound = _cholesky_solve(m, rhs, judge)

@@ -35,6 +35,7 @@ import jax
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
+from lagjax._linalg.marked_solves import solves_marked
 from lagjax._linalg.scalarize import scalar_argument_function
 from lagjax._linalg.small_solves import (
     UNROLLED_SOLVE_LIMIT,
@@ -121,9 +122,6 @@ def _solve_scalar(system: Callable, poison: bool) -> tuple[jax.Array, jax.Array]
     return (jnp.where(singular, jnp.nan, x) if poison else x), singular
 
 
-# Compiled so that eager calls do not dispatch the scalar derivation op by op; under
-# an outer jit this is inlined.
-@eqx.filter_jit
 def euler_lagrange_acceleration(
     lagrangian: Callable[[Any, Any, Any, Any], jax.Array],
     q: Any,
@@ -156,6 +154,21 @@ def euler_lagrange_acceleration(
 
     **Returns:** q̈ with the structure of `q`.
     """
+    return _compiled_acceleration(
+        lagrangian, q, qdot, t, args, generalized_force,
+        check=check, marked=solves_marked(),
+    )  # fmt: skip
+
+
+# Compiled so that eager calls do not dispatch the scalar derivation op by op; under
+# an outer jit this is inlined. `marked` (whether the Taylor graph's trace marks
+# solves, `marked_solves`) is part of the key, so a trace made with the mark on is
+# never reused without it, nor one made without it under the mark.
+@eqx.filter_jit
+def _compiled_acceleration(
+    lagrangian, q, qdot, t, args, generalized_force, *, check, marked
+) -> Any:
+    del marked  # read by `solve_symmetric_system` during the trace
     lag_flat, q_flat, v_flat, t, unravel = flat_lagrangian(lagrangian, q, qdot, t, args)
     force = None if generalized_force is None else ravel_pytree(generalized_force)[0]
     if q_flat.shape[0] <= SCALAR_COORDINATE_LIMIT:

@@ -36,6 +36,7 @@ from typing import Any, NamedTuple
 import jax
 import jax.numpy as jnp
 
+from lagjax._linalg.marked_solves import marking_solves
 from lagjax._linalg.scalarize import as_object_array, objects_from_scalars, scalarize
 
 from .graph import lower
@@ -59,14 +60,15 @@ def lower_vector_field(
     def flat(t, y, *arg_leaves):
         return vector_field(t, y, jax.tree_util.tree_unflatten(treedef, arg_leaves))
 
-    closed = jax.make_jaxpr(flat)(t0, y0, *leaves)
+    with marking_solves():  # a mass-matrix solve as one operation with its rule
+        closed = jax.make_jaxpr(flat)(t0, y0, *leaves)
+        twin = scalarize(flat, t0, y0, *leaves, branches=True) if scalar else None
     out_aval = closed.out_avals[0] if len(closed.out_avals) == 1 else None
     if out_aval is None or out_aval.shape != jnp.shape(y0):
         raise TypeError(
             "lagjax.Taylor: vector_field(t, y, args) must return one array shaped "
             f"like y {jnp.shape(y0)}, got {closed.out_avals}"
         )
-    twin = scalarize(flat, t0, y0, *leaves, branches=True) if scalar else None
     if twin is None:
         return lower(closed), leaves
     n, shapes = y0.shape[0], [jnp.shape(leaf) for leaf in leaves]

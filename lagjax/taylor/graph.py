@@ -32,6 +32,7 @@ import jax.extend as jex
 import jax.numpy as jnp
 
 import lagjax.taylor.recurrences as rec
+from lagjax._linalg.marked_solves import MARKED_SOLVE_NAME
 
 from .graph_signs import fold, foldable, rewrite
 from .graph_values import (
@@ -198,7 +199,9 @@ def _walk(
 
     for eqn in jaxpr.eqns:
         ins = [read(v) for v in eqn.invars]
-        if eqn.primitive.name in CALLS:
+        if eqn.params.get("name") == MARKED_SOLVE_NAME and any(builder.flags(ins)):
+            outs = _lower_marked_solve(builder, eqn, ins)
+        elif eqn.primitive.name in CALLS:
             inner, consts = inner_jaxpr(eqn)
             const_ids = [builder.constant(c) for c in consts]
             outs = _walk(builder, inner, const_ids, ins)
@@ -218,6 +221,18 @@ def _walk(
             outs = builder.emit(rule, ins, [v.aval for v in eqn.outvars], False)
         env.update(zip(eqn.outvars, outs))
     return [read(v) for v in jaxpr.outvars]
+
+
+def _lower_marked_solve(builder: Builder, eqn: Any, ins: list[int]) -> list[int]:
+    """A marked solve (`lagjax._linalg.marked_solves`): x by its own recurrence
+    (`LinearSolve`), the singular flag once per step from the order-0 values."""
+    params, flags = primitive_params(eqn), builder.flags(ins)
+    x_aval, flag_aval = (v.aval for v in eqn.outvars)
+    rule = rec.LinearSolve(primitive=eqn.primitive, params=params, series=flags)
+    (x,) = builder.emit(rule, ins, [x_aval], True)
+    verdict = rec.Fixed(primitive=eqn.primitive, params=params, series=flags)
+    _, singular = builder.emit(verdict, ins, [x_aval, flag_aval], False)
+    return [x, singular]
 
 
 def _lower_cond(builder: Builder, eqn: Any, ins: list[int]) -> list[int]:

@@ -68,6 +68,10 @@ def cauchy(a: Any, b: Any, k: Any) -> jax.Array:
         for j in range(1, k + 1):
             total = total + a[j] * b[k - j]
         return total
+    # A scalar operand of an array one (lax broadcasts rank 0): its orders
+    # broadcast along the other's element axes, not against the order axis.
+    rank = max(a.ndim, b.ndim)
+    a, b = (x.reshape(x.shape + (1,) * (rank - x.ndim)) for x in (a, b))
     return jnp.sum(a * _window(b, k), axis=0)
 
 
@@ -304,3 +308,30 @@ class Branch(AbstractPrimitiveRule):
             return (jnp.where(orders0[0] >= 0, coeffs[0], -coeffs[0]),)
         first = orders0[0] >= orders0[1] if name == "max" else orders0[0] <= orders0[1]
         return (jnp.where(first, coeffs[0], coeffs[1]),)
+
+
+class LinearSolve(AbstractPrimitiveRule):
+    """x = M⁻¹ b, a marked solve call (`lagjax._linalg.marked_solves`) whose
+    outputs are (x, singular); this rule gives x. From M x = b,
+
+        xₖ = M₀⁻¹ (bₖ − Σ_{j=1}^{k} Mⱼ xₖ₋ⱼ)
+
+    (the j = 0 term drops out: xₖ is still zero when the sum is formed)."""
+
+    primitive: Any = eqx.field(static=True)
+    params: dict = eqx.field(static=True)
+    series: tuple[bool, ...] = eqx.field(static=True)
+
+    def zero(self, *inputs):
+        return self._bind(*inputs)[:1]
+
+    def coefficient(self, k, inputs, outputs):
+        (m, b), (x,) = inputs, outputs
+        residual = coefficient(b, k, self.series[1])
+        if not self.series[0]:
+            return (jnp.linalg.solve(m, residual),)
+        if isinstance(m, list):
+            coupling = sum(m[j] @ x[k - j] for j in range(1, k + 1))
+        else:
+            coupling = jnp.sum(jax.vmap(jnp.matmul)(m, _window(x, k)), axis=0)
+        return (jnp.linalg.solve(m[0], residual - coupling),)
