@@ -357,6 +357,7 @@ def chain_case(config: dict) -> list[dict]:
         case = f"{n}-link"
         rows += heyoka_rows(case, chain, y0, t1, config["chain_tol"], exact,
                             config["single_repeats"], derive_s)  # fmt: skip
+        rows.append(jax_taylor_row(case, chain, y0, t1, config["chain_tol"], exact))
         rows.append(dopri8_row(case, chain, y0, t1, exact))
     return rows
 
