@@ -55,6 +55,7 @@ def test_crossings_lie_on_the_invariant_ellipse_at_the_closed_form_times():
     )
 
 
+@pytest.mark.integration  # a long run; CI runs it in its integration step (default-suite time)
 def test_both_directions_alternate_and_pad_with_nan():
     both = _oscillator_section(direction=0, max_crossings=16)
     # Upward at ω_x t = π/2 + 2πk, downward at 3π/2 + 2πk: 13 before t = 40.
@@ -87,6 +88,7 @@ def test_lagrangian_pendulum_crosses_at_three_quarter_periods():
     )
 
 
+@pytest.mark.integration  # a long run; CI runs it in its integration step (default-suite time)
 def test_plot_draws_every_stored_crossing():
     import matplotlib
 

@@ -130,7 +130,12 @@ def _residuals(run):
 
 
 @pytest.mark.parametrize(
-    "steps", [10**5, pytest.param(10**6, marks=pytest.mark.slow)], ids=["1e5", "1e6"]
+    "steps",
+    [
+        pytest.param(10**5, marks=pytest.mark.integration),  # default-suite time
+        pytest.param(10**6, marks=pytest.mark.slow),
+    ],
+    ids=["1e5", "1e6"],
 )
 def test_constraints_stay_at_round_off_over_many_steps(steps):
     # Round-off would show as growth with the step count: 10⁵ steps by default,

@@ -166,7 +166,10 @@ ASYMMETRIC = jnp.array([1.0, 2.0, 3.0])
 NEAR_INTERMEDIATE = jnp.array([1e-3, 1.0, 1e-3])
 
 
-@pytest.mark.parametrize("method", ["adaptive", "yoshida4"])
+@pytest.mark.parametrize(
+    "method",
+    [pytest.param("adaptive", marks=pytest.mark.integration), "yoshida4"],
+)  # the adaptive run in CI's integration step (default-suite time)
 def test_dzhanibekov_flip_period_is_the_elliptic_value(method):
     body = RigidBody(ASYMMETRIC)
     y0 = body.state_from_angular_velocity(

@@ -125,6 +125,7 @@ def test_cartesian_and_polar_forms_agree():
             assert error < 1e-8
 
 
+@pytest.mark.integration  # a long run; CI runs it in its integration step (default-suite time)
 def test_closed_forms_follow_the_parameters():
     # (m, μ, a, e): not the natural units, so a missing factor would show.
     parameters = np.array(

@@ -84,6 +84,7 @@ def co2_coordinates(scene, start, run):
 co2_mode_state = eqx.filter_jit(LinearTriatomicMolecule.mode_state)
 
 
+@pytest.mark.integration  # a long run; CI runs it in its integration step (default-suite time)
 def test_co2_motion_started_in_a_mode_stays_in_it():
     # Yoshida6 at ω₃h = 0.024 over 0.5 ps ≈ 38 periods of the asymmetric stretch.
     scene = LinearTriatomicMolecule()

@@ -140,6 +140,7 @@ def test_measured_larmor_radius_is_m_v_perp_over_eb():
         )
 
 
+@pytest.mark.integration  # a long run; CI runs it in its integration step (default-suite time)
 def test_measured_drift_is_e_cross_b_over_b_squared():
     # E = 0.2 x̂, B = ẑ: |v_E| = E/B = 0.2 along E×B = −ŷ, whatever the charge or mass.
     for name in ("crossed E, B", "crossed, e < 0"):

@@ -68,6 +68,7 @@ def test_pendulum_period_series_at_small_amplitude():
     assert np.isclose(scene.period(), expected, rtol=1e-12, atol=0)
 
 
+@pytest.mark.integration  # a long run; CI runs it in its integration step (default-suite time)
 def test_pendulum_period_measured_at_150_and_179_9_degrees():
     # Near the separatrix the period is sensitive to the energy: δT/T =
     # δE/(4mgl k′²K) ≈ 4e4 δE/mgl at 179.9°. Yoshida6 at h = 0.01 (ω₀h = 0.03)

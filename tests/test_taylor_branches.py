@@ -116,6 +116,7 @@ def test_four_coordinate_lagrangian_integrates():
     np.testing.assert_allclose(run.q, reference.q, atol=1e-9)
 
 
+@pytest.mark.integration  # a long run; CI runs it in its integration step (default-suite time)
 def test_members_of_a_batch_take_their_own_branch():
     """y0 on either side of the branch, one `vmap`: each member follows the
     flow of its own side, exp(A t) y0, while it stays there (t ≤ 0.3)."""

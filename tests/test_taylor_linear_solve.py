@@ -54,7 +54,12 @@ def _rules(field, args):
     "field, args", [(_moving_matrix_field, None), (_fixed_matrix_field, FIXED_MASS)]
 )
 @pytest.mark.parametrize(
-    "unroll, scalar", [(False, False), (True, False), (False, True)]
+    "unroll, scalar",
+    [
+        (False, False),
+        pytest.param(True, False, marks=pytest.mark.integration),
+        (False, True),
+    ],
 )
 def test_solve_coefficients_match_nested_jvp(field, args, unroll, scalar):
     """The array graph's solve is one operation (no Cholesky loop lowered); the

@@ -172,6 +172,7 @@ def test_fourth_order_on_a_precessing_orbit():
     assert 3.7 <= slope <= 4.3, (errors, slope)
 
 
+@pytest.mark.integration  # a long run; CI runs it in its integration step (default-suite time)
 def test_a_users_weight_gives_the_same_orbit():
     """w(x) = x^(-3/2): dt/ds = r^(3/2), steps still finer at pericentre."""
     e, ts = 0.7, np.linspace(0, 3 * PERIOD, 7)
