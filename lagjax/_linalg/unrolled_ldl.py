@@ -15,7 +15,7 @@ References: Golub & Van Loan, *Matrix Computations*, 4th ed., §4.1.2 ($LDL^T$).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any, NamedTuple
 
 import jax
@@ -37,12 +37,19 @@ class UnrolledLDL(NamedTuple):
     raw: list[jax.Array]
 
 
-def ldl_factor_unrolled(m: Sequence[Sequence[Any]]) -> UnrolledLDL:
+def _positive_or_one(pivot: Any) -> Any:
+    return jnp.where(pivot > 0, pivot, jnp.ones_like(pivot))
+
+
+def ldl_factor_unrolled(
+    m: Sequence[Sequence[Any]], guard: Callable[[Any], Any] = _positive_or_one
+) -> UnrolledLDL:
     """$LDL^T$ of a symmetric matrix given as lists of scalars (upper triangle read).
 
-    A pivot that is not positive is replaced by 1 before it divides anything, so
-    solves stay finite (and their derivatives NaN-free) where a caller will
-    discard them on the verdict of `pivots_sound`.
+    By default (`guard`) a pivot that is not positive is replaced by 1 before it
+    divides anything, so solves stay finite (and their derivatives NaN-free) where
+    a caller will discard them on the verdict of `pivots_sound`. Scalars that are
+    not JAX values (heyoka's expressions) take `guard=lambda pivot: pivot`.
     """
     n = len(m)
     lower: list[list[jax.Array]] = [[] for _ in range(n)]
@@ -53,7 +60,7 @@ def ldl_factor_unrolled(m: Sequence[Sequence[Any]]) -> UnrolledLDL:
         for k in range(j):
             pivot = pivot - lower[j][k] * lower[j][k] * pivots[k]
         raw.append(pivot)
-        pivots.append(jnp.where(pivot > 0, pivot, jnp.ones_like(pivot)))
+        pivots.append(guard(pivot))
         for i in range(j + 1, n):
             entry = m[j][i]
             for k in range(j):

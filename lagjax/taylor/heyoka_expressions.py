@@ -50,6 +50,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from lagjax._linalg.jaxpr_interpreter import evaluate_jaxpr
+from lagjax._linalg.marked_solves import MARKED_SOLVE_NAME, marking_solves
+from lagjax._linalg.unrolled_ldl import ldl_factor_unrolled, ldl_solve_unrolled
 from lagjax.taylor.heyoka_control import CONTROL_RULES
 from lagjax.taylor.heyoka_moves import DATA_MOVES, bind, move
 from lagjax.taylor.heyoka_rules import (
@@ -178,9 +180,10 @@ def translate_function(
     expressions, its shape, its dtype, the poisoned primitives met, the digest
     of its jaxpr, `jaxpr_digest`)."""
     hy = import_heyoka()
-    closed = jax.make_jaxpr(fn)(
-        jnp.zeros((), float), jnp.zeros((n,), float), args_example
-    )
+    with marking_solves():  # the mass-matrix solve as LDLᵀ (`_marked_solve`)
+        closed = jax.make_jaxpr(fn)(
+            jnp.zeros((), float), jnp.zeros((n,), float), args_example
+        )
     if len(closed.out_avals) != 1:
         raise ValueError(
             f"the function translated for heyoka must return one array; it returned "
@@ -224,6 +227,25 @@ def jaxpr_digest(closed: Any, n: int, args_example: Any) -> str:
     return digest.hexdigest()
 
 
+def _marked_solve(hy: Any, m: np.ndarray, rhs: np.ndarray) -> list[np.ndarray]:
+    """A marked solve (`lagjax._linalg.marked_solves`) in expressions: LDLᵀ
+    without pivoting, each pivot d used as √d·√d, so that a pivot that is not
+    positive (M indefinite or singular) makes the right-hand side NaN and the
+    run fails as non-finite instead of following an unstable factorization.
+    heyoka has no verdict to carry: the singular flag is False."""
+
+    def positive_or_nan(pivot: Any) -> Any:
+        if not isinstance(pivot, hy.expression):
+            return pivot if pivot > 0 else np.float64(np.nan)
+        root = hy.sqrt(pivot)
+        return root * root
+
+    n = rhs.shape[0]
+    upper = [[m[i, j] for j in range(n)] for i in range(n)]
+    factor = ldl_factor_unrolled(upper, guard=positive_or_nan)
+    return [_objects(ldl_solve_unrolled(factor, list(rhs)), (n,)), np.asarray(False)]
+
+
 def _objects(elements: Sequence[Any], shape: Sequence[int]) -> np.ndarray:
     array = np.empty(len(elements), dtype=object)
     array[:] = list(elements)
@@ -253,6 +275,8 @@ class _Walk:
         name = eqn.primitive.name
         if not any(symbolic(x) for x in operands):
             return bind(eqn, operands)
+        if eqn.params.get("name") == MARKED_SOLVE_NAME:
+            return _marked_solve(self.hy, *operands)
         if name in INNER_JAXPR:
             return self.enter(eqn.params[INNER_JAXPR[name]], operands)
         if name in CONTROL_RULES:
