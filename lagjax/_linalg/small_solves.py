@@ -358,6 +358,9 @@ def solve_unrolled_symmetric(
     (n-link pendulum in an RK4 scan, n = 6: 0.75 → 0.34× the Cholesky twin for
     one trajectory, 2.25 → 1.16–1.23× ×64).
 
+    Under `marked_solves.marking_solves` the solve is one named call, as in
+    `solve_symmetric_system`.
+
     `system`, when given, returns `(m, rhs)` again: the fallback branch calls it
     instead of taking the n² + n scalars as its operands, so that its operands are
     the (few) inputs they were computed from. Handing the branch the scalars made
@@ -365,6 +368,10 @@ def solve_unrolled_symmetric(
     from 0.27× to 1.9× its hand-written twin (`benchmarks/derivation_overhead.py`).
     """
     n = len(rhs)
+    if solves_marked():  # as `solve_symmetric_system` (`marked_solves`)
+        full = [[m[min(i, j)][max(i, j)] for j in range(n)] for i in range(n)]
+        matrix = jnp.stack([jnp.stack(row) for row in full])
+        return marked_solve(solve_dense, matrix, jnp.stack(rhs))
     factor = ldl_factor_unrolled(m)
     sound = pivots_sound(factor)
     by_ldl = jnp.stack(ldl_solve_unrolled(factor, rhs))
