@@ -18,7 +18,8 @@ for physical systems, positive definite. Four forms:
   decided per batch under `vmap` (see its docstring).
 
 All return a flag that is true when M is numerically singular; callers turn it into
-a run-time error with `raise_if_singular` instead of passing on inf/NaN.
+a run-time error with `singular_verdicts.raise_if_singular` instead of passing on
+inf/NaN.
 """
 
 from __future__ import annotations
@@ -27,12 +28,10 @@ import functools
 from collections.abc import Callable
 from typing import Any
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 import numpy as np
-from jax.core import Tracer
 
 from lagjax._core.batch_branch import any_in_batch
 from lagjax._linalg.loop_factorizations import (
@@ -387,27 +386,3 @@ def solve_unrolled_symmetric(
         return by_ldl, jnp.zeros((), dtype=bool)
 
     return jax.lax.cond(any_in_batch(~sound), with_lu, without_lu)
-
-
-def singular_message_for(what: str) -> str:
-    """The error message for a singular matrix described by `what`."""
-    return (
-        f"{what} is singular at this state, so it cannot be inverted. Is the "
-        "function degenerate (e.g. L linear in q̇), or is the state at a coordinate "
-        "singularity (e.g. Euler-angle gimbal lock)?"
-    )
-
-
-def raise_if_singular(x, singular: jax.Array, what: str):
-    """Attach a run-time error to `x` when `singular` is true (works inside jit)."""
-    return eqx.error_if(x, singular, singular_message_for(what))
-
-
-def singular_check(check: bool | str | None, *trees: Any) -> bool | str:
-    """The singular-matrix test to run: `check` itself when given, else an error on
-    concrete values and NaN poisoning when any leaf is traced (a branch per
-    evaluation would split a fused integration step)."""
-    if check is not None:
-        return check
-    traced = any(isinstance(leaf, Tracer) for leaf in jax.tree_util.tree_leaves(trees))
-    return "nan" if traced else True

@@ -37,9 +37,9 @@ from jax.flatten_util import ravel_pytree
 
 from lagjax._linalg.marked_solves import solves_marked
 from lagjax._linalg.scalarize import scalar_argument_function
+from lagjax._linalg.singular_verdicts import raise_if_singular
 from lagjax._linalg.small_solves import (
     UNROLLED_SOLVE_LIMIT,
-    raise_if_singular,
     solve_symmetric_system,
     solve_unrolled,
     solve_unrolled_symmetric,

@@ -37,7 +37,7 @@ from lagjax._core.terms import (
     LagrangianVectorField,
     RattleTerm,
 )
-from lagjax._linalg.small_solves import singular_check as singular_check
+from lagjax._linalg.singular_verdicts import singular_check as singular_check
 from lagjax.mechanics.captured_globals import (
     captured_identity,
     warn_captured_numbers,

@@ -45,9 +45,9 @@ from jax.flatten_util import ravel_pytree
 
 from lagjax._core.precision import reachable_tolerance
 from lagjax._linalg.scalarize import scalar_argument_function
+from lagjax._linalg.singular_verdicts import singular_message_for
 from lagjax._linalg.small_solves import (
     UNROLLED_SOLVE_LIMIT,
-    singular_message_for,
     solve_dense_in_step,
     solve_unrolled,
     solve_unrolled_symmetric,

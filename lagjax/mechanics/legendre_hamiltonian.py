@@ -17,7 +17,7 @@ import equinox as eqx
 import jax
 
 from lagjax._core.system_protocols import LagrangianLike
-from lagjax._linalg.small_solves import singular_check
+from lagjax._linalg.singular_verdicts import singular_check
 from lagjax.mechanics.abstract_hamiltonian import AbstractHamiltonian
 from lagjax.mechanics.legendre import invert_gradient, tree_dot
 from lagjax.mechanics.signature import check_same_structure

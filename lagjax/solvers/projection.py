@@ -47,7 +47,8 @@ from lagjax._core.solver_kinds import AbstractConstraintKeeping
 from lagjax._core.system_protocols import LagrangianLike
 from lagjax._core.terms import ConstrainedLagrangianTerm, unwrap_term
 from lagjax._linalg.in_step_root_find import root_find_in_step
-from lagjax._linalg.small_solves import singular_check, solve_dense, solve_dense_in_step
+from lagjax._linalg.singular_verdicts import singular_check
+from lagjax._linalg.small_solves import solve_dense, solve_dense_in_step
 from lagjax.mechanics.constraints import apply_rank_check, least_correction
 from lagjax.mechanics.scalar_constraints import (
     scalar_constraints_apply,

@@ -46,9 +46,9 @@ from lagjax._core.solver_kinds import (
 from lagjax._core.system_protocols import LagrangianLike
 from lagjax._core.terms import RattleTerm, physical_step, unwrap_term
 from lagjax._linalg.in_step_root_find import root_find_in_step
+from lagjax._linalg.singular_verdicts import raise_if_singular
 from lagjax._linalg.small_solves import (
     UNROLLED_SOLVE_LIMIT,
-    raise_if_singular,
     solve_dense,
     solve_dense_in_step,
     solve_unrolled,
