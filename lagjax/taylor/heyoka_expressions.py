@@ -240,6 +240,8 @@ def _marked_solve(hy: Any, m: np.ndarray, rhs: np.ndarray) -> list[np.ndarray]:
         root = hy.sqrt(pivot)
         return root * root
 
+    if rhs.ndim != 1:
+        raise UnsupportedPrimitiveError(MARKED_SOLVE_NAME, "several right-hand sides")
     n = rhs.shape[0]
     upper = [[m[i, j] for j in range(n)] for i in range(n)]
     factor = ldl_factor_unrolled(upper, guard=positive_or_nan)
