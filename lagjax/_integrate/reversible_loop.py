@@ -66,7 +66,7 @@ from lagjax._integrate.scan_body import (
     steps_per_trip,
 )
 from lagjax.solvers.bit_reversible import BitReversible
-from lagjax.solvers.splitting import AbstractSplittingSolver
+from lagjax.solvers.splitting_engine import AbstractSplittingSolver
 
 
 class Clock(NamedTuple):

@@ -44,7 +44,7 @@ import jax.numpy as jnp
 from lagjax._integrate.reversible_steps import repeat_steps
 from lagjax._integrate.scan_body import steps_per_trip
 from lagjax.solvers.compensated import compensated_add
-from lagjax.solvers.splitting import AbstractSplittingSolver
+from lagjax.solvers.splitting_engine import AbstractSplittingSolver
 
 
 class SplittingCotangent(NamedTuple):

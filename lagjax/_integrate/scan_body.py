@@ -20,7 +20,7 @@ import diffrax
 import jax
 import jax.numpy as jnp
 
-from lagjax.solvers.splitting import AbstractSplittingSolver
+from lagjax.solvers.splitting_engine import AbstractSplittingSolver
 
 
 def tree_select(flag: Any, new: Any, old: Any) -> Any:

@@ -63,7 +63,7 @@ from diffrax import (
 )
 
 from lagjax._core.solver_kinds import AbstractSplittingMethod, AbstractTimeReversible
-from lagjax.solvers.splitting import AbstractSplittingSolver
+from lagjax.solvers.splitting_engine import AbstractSplittingSolver
 
 # The lattice has 2⁶² units on each side of zero; an increment of at most 2⁶¹
 # added to a state of at most 2⁶² cannot wrap an int64 (2⁶³).

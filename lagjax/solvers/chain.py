@@ -53,7 +53,7 @@ import jax.numpy as jnp
 
 from lagjax.solvers.chain_coordinates import chain_separations
 from lagjax.solvers.extrapolation import GraggBulirschStoer
-from lagjax.solvers.splitting import AbstractSplittingSolver
+from lagjax.solvers.splitting_engine import AbstractSplittingSolver
 from lagjax.solvers.time_transformed import TimeTransformed, logarithmic_weight
 
 

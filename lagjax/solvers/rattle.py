@@ -18,8 +18,8 @@ constraint $\dot g = 0$ — linear in μ, one small solve. The map is symplectic
 the constraint manifold $T^*\mathcal M$, symmetric (time-reversible) and of order 2;
 $g$ and $\dot g$ hold to the solver tolerance at every step, so they do not drift.
 
-As in `splitting.py`, the step is formed as small increments Δq, Δp that are added
-to the state with Kahan's compensated summation.
+As in `splitting_engine.py`, the step is formed as small increments Δq, Δp that
+are added to the state with Kahan's compensated summation.
 
 References: Andersen, *Rattle*, J. Comput. Phys. 52, 24 (1983); Ryckaert, Ciccotti
 & Berendsen, J. Comput. Phys. 23, 327 (1977) (SHAKE); Hairer, Lubich & Wanner,

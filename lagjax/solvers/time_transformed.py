@@ -69,7 +69,7 @@ import jax.numpy as jnp
 
 from lagjax._linalg.scalar_value_and_gradient import value_and_scalar_gradient
 from lagjax.solvers.extrapolation import GraggBulirschStoer
-from lagjax.solvers.splitting import AbstractSplittingSolver
+from lagjax.solvers.splitting_engine import AbstractSplittingSolver
 
 
 class SeparableEnergies(Protocol):
