@@ -57,6 +57,14 @@ def test_running_out_of_steps_is_one_clear_error():
                     solver=lj.Taylor(backend="heyoka"), rtol=1e-14, atol=1e-14)  # fmt: skip
 
 
+@pytest.mark.parametrize("backend", ["jax", "heyoka"])
+def test_out_of_steps_names_the_tolerance_the_solver_used(backend):
+    """The solver's own rtol, not simulate's default it overrode."""
+    with pytest.raises(lj.SimulationError, match=r"rtol = 1e-13\)"):
+        lj.simulate(oscillator(), (1.0, 0.0), t1=100.0, max_steps=5,
+                    solver=lj.Taylor(rtol=1e-13, atol=1e-13, backend=backend))  # fmt: skip
+
+
 @pytest.mark.parametrize(
     "options, named",
     [

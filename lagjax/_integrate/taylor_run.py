@@ -90,7 +90,8 @@ def run_taylor(
             rtol=rtol, atol=atol, max_steps=max_steps, event=event,
         )  # fmt: skip
     if throw:
-        trajectory = _verdict(trajectory, rtol)
+        # the tolerance the run used: the solver's own when it has one
+        trajectory = _verdict(trajectory, rtol if solver.rtol is None else solver.rtol)
     return trajectory
 
 
