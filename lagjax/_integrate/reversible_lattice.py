@@ -34,7 +34,8 @@ from lagjax._integrate.reversible_splitting import (
     SplittingCotangent,
     walk_steps_back,
 )
-from lagjax.solvers.bit_reversible import BitReversible, lattice_moved, step_size
+from lagjax.solvers.bit_reversible import BitReversible, step_size
+from lagjax.solvers.integer_lattice import lattice_moved
 
 
 def _tree_add(a: Any, b: Any) -> Any:

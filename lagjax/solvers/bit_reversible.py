@@ -26,16 +26,16 @@ be meaningless, so a step's tangent is that of the floating-point step (the
 wrapped method, uncompensated) at the lattice state — a straight-through
 derivative, the same in forward and reverse mode.
 
-The lattice. Per leaf of q and of p, $\varepsilon = 2^{k - 62}$ with $2^k$ the
-first power of two at or above the leaf's range: `q_range` / `p_range` when
-given, otherwise `headroom` (1024) times the largest magnitude of the leaf in y0
-(1 for a zero leaf). A state of magnitude $|x|$ then carries about
-$62 - \log_2(\text{range}/|x|)$ bits, against float64's 53: at the initial
-magnitude with the default headroom, 52 — float64 round-off, fixed instead of
-floating. A state that leaves its range (or an increment of more than 2⁶¹ units)
-is poisoned (NaN) and stops the run as a non-finite state; pass them explicitly when the
-run will wander far from its start (an orbit released from apocentre gains
-(1+e)/(1−e) in momentum).
+The lattice (`lagjax.solvers.integer_lattice`). Per leaf of q and of p,
+$\varepsilon = 2^{k - 62}$ with $2^k$ the first power of two at or above the leaf's
+range: `q_range` / `p_range` when given, otherwise `headroom` (1024) times the
+largest magnitude of the leaf in y0 (1 for a zero leaf). A state of magnitude $|x|$
+then carries about $62 - \log_2(\text{range}/|x|)$ bits, against float64's 53: at
+the initial magnitude with the default headroom, 52 — float64 round-off, fixed
+instead of floating. A state that leaves its range (or an increment of more than 2⁶¹
+units) is poisoned (NaN) and stops the run as a non-finite state; pass them
+explicitly when the run will wander far from its start (an orbit released from
+apocentre gains (1+e)/(1−e) in momentum).
 
 Exactness needs the increments computed alike forward and backward, which holds
 for an autonomous H (a time-dependent V sees its kicks' times rounded
@@ -63,83 +63,16 @@ from diffrax import (
 )
 
 from lagjax._core.solver_kinds import AbstractSplittingMethod, AbstractTimeReversible
+from lagjax.solvers.integer_lattice import (
+    Lattice,
+    lattice_moved,
+    lattice_spacing,
+    off_lattice,
+)
 from lagjax.solvers.splitting_engine import AbstractSplittingSolver
 
-# The lattice has 2⁶² units on each side of zero; an increment of at most 2⁶¹
-# added to a state of at most 2⁶² cannot wrap an int64 (2⁶³).
-_LATTICE_BITS = 62
-_STATE_LIMIT = 2**62
-_INCREMENT_LIMIT = 2.0**61
 # Steps within this relative difference of the nominal one are taken as it.
 _SAME_STEP = 1e-9
-
-
-def _spacing(leaf: jax.Array, given: float | None, headroom: float) -> jax.Array:
-    """The lattice spacing of one leaf: a power of two, 2⁶² of them span its range."""
-    if given is not None:
-        extent = jnp.asarray(given, leaf.dtype)
-    else:
-        largest = jnp.max(jnp.abs(leaf)) if leaf.size else jnp.zeros((), leaf.dtype)
-        extent = headroom * jnp.where(largest > 0, largest, 1.0)
-    exponent = jnp.ceil(jnp.log2(extent)).astype(jnp.int32)
-    return jax.lax.stop_gradient(jnp.ldexp(jnp.ones((), leaf.dtype), exponent - 62))
-
-
-class Lattice(eqx.Module):
-    """The spacings of the q and p leaves (powers of two)."""
-
-    q: Any
-    p: Any
-
-    def encode(self, y: Any) -> tuple[Any, Any]:
-        """The lattice point nearest to the float state `y = (q, p)`."""
-        q, p = y
-
-        def to_units(x, spacing):
-            return jnp.rint(x / spacing).astype(jnp.int64)
-
-        return (
-            jax.tree_util.tree_map(to_units, q, self.q),
-            jax.tree_util.tree_map(to_units, p, self.p),
-        )
-
-    def decode_q(self, units: Any) -> Any:
-        return jax.tree_util.tree_map(lambda u, s: u * s, units, self.q)
-
-    def decode_p(self, units: Any) -> Any:
-        return jax.tree_util.tree_map(lambda u, s: u * s, units, self.p)
-
-
-def lattice_moved(units: Any, increment: Any, spacing: Any) -> tuple[Any, Any]:
-    """`(units + [increment/spacing], too_large)`, the flag per element: one stage's
-    move on the lattice (`reversible_lattice` undoes it with −increment)."""
-
-    def move(u, d, s):
-        steps = d / s
-        return u + jnp.rint(steps).astype(jnp.int64), jnp.abs(steps) > _INCREMENT_LIMIT
-
-    pairs = jax.tree_util.tree_map(move, units, increment, spacing)
-    outer = jax.tree_util.tree_structure(units)
-    moved, flags = jax.tree_util.tree_transpose(
-        outer, jax.tree_util.tree_structure((0, 0)), pairs
-    )
-    return moved, flags
-
-
-def _off_lattice(units: Any, flags: list[Any]) -> Any:
-    """Per element of `units`: a stage's increment beyond 2⁶¹ units or the state
-    beyond 2⁶², either of which could wrap the int64 sums. Element by element, not
-    reduced: a reduction per stage would cost a kernel each (Kepler, Störmer–Verlet:
-    73 → 55 ns a step); the step poisons the elements instead (NaN), which the
-    run's finiteness test reads once per block."""
-
-    def beyond(u, *stage_flags):
-        bad = jnp.abs(u) > _STATE_LIMIT
-        for flag in stage_flags:
-            bad = bad | flag
-        return bad
-
-    return jax.tree_util.tree_map(beyond, units, *flags)
 
 
 def step_size(t0, t1, nominal):
@@ -229,7 +162,7 @@ def _lattice_step(method, params, static, times, units, lattice: Lattice, force,
         q_flags.append(flag)
         p_flags.append(flag_p)
     units = (q_units, p_units)
-    off = (_off_lattice(q_units, q_flags), _off_lattice(p_units, p_flags))
+    off = (off_lattice(q_units, q_flags), off_lattice(p_units, p_flags))
     return units, force, off, (q_dot, p_dot, force_dot)
 
 
@@ -351,10 +284,10 @@ class BitReversible(
         q0, p0 = y0
         return Lattice(
             jax.tree_util.tree_map(
-                lambda x: _spacing(x, self.q_range, self.headroom), q0
+                lambda x: lattice_spacing(x, self.q_range, self.headroom), q0
             ),
             jax.tree_util.tree_map(
-                lambda x: _spacing(x, self.p_range, self.headroom), p0
+                lambda x: lattice_spacing(x, self.p_range, self.headroom), p0
             ),
         )
 
