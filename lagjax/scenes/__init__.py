@@ -21,7 +21,6 @@ from lagjax.scenes.constrained import CartesianPendulum as CartesianPendulum
 from lagjax.scenes.constrained import (
     CartesianRotatingWireBead as CartesianRotatingWireBead,
 )
-from lagjax.scenes.constrained import RollingDisk as RollingDisk
 from lagjax.scenes.driven import DampedDrivenOscillator as DampedDrivenOscillator
 from lagjax.scenes.earth import EastwardDeflection as EastwardDeflection
 from lagjax.scenes.earth import FoucaultPendulum as FoucaultPendulum
@@ -38,6 +37,7 @@ from lagjax.scenes.pythagorean import PythagoreanThreeBody as PythagoreanThreeBo
 from lagjax.scenes.rigid import EarthFreePrecession as EarthFreePrecession
 from lagjax.scenes.rigid import HeavySymmetricTop as HeavySymmetricTop
 from lagjax.scenes.rigid import TorqueFreeBody as TorqueFreeBody
+from lagjax.scenes.rolling_disk import RollingDisk as RollingDisk
 from lagjax.scenes.rotating import AcceleratedFrameParticle as AcceleratedFrameParticle
 from lagjax.scenes.rotating import BeadOnRotatingWire as BeadOnRotatingWire
 from lagjax.scenes.rotating import SpinningFrameParticle as SpinningFrameParticle
