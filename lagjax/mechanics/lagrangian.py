@@ -18,25 +18,15 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 from jax.flatten_util import ravel_pytree
 
 from lagjax._core.precision import cast_floats
-from lagjax._core.solver_kinds import (
-    AbstractSymplecticRungeKutta,
-    DefaultMethod,
-    is_partitioned,
-)
+from lagjax._core.solver_kinds import DefaultMethod
 from lagjax._core.system import AbstractSystem
-from lagjax._core.terms import (
-    ConstrainedLagrangianTerm,
-    LagrangianTerm,
-    LagrangianVectorField,
-    RattleTerm,
-)
+from lagjax._core.terms import RattleTerm
 from lagjax._linalg.singular_verdicts import singular_check as singular_check
 from lagjax.mechanics.captured_globals import (
     captured_identity,
@@ -50,6 +40,7 @@ from lagjax.mechanics.constraints import (
 from lagjax.mechanics.declared_structure import check_declared_quadratic
 from lagjax.mechanics.euler_lagrange import euler_lagrange_acceleration
 from lagjax.mechanics.functions import as_system_function
+from lagjax.mechanics.lagrangian_integration import lagrangian_integration
 from lagjax.mechanics.legendre import tree_dot
 from lagjax.mechanics.legendre_hamiltonian import LegendreHamiltonian
 from lagjax.mechanics.network_formulation import (
@@ -362,36 +353,8 @@ class Lagrangian(AbstractSystem):
     def integration(self, solver: Any, y0: Any, t0: Any, args: Any) -> Any:
         """(q, q̇) with the Euler–Lagrange vector field for general solvers; (q, p)
         of the Legendre transform for symplectic ones (and L itself for variational
-        ones, the constraints for RATTLE)."""
-
-        def canonical_start():
-            q0, qdot0 = y0
-            return (q0, self.momentum(q0, qdot0, t0, args))
-
-        if self.constraints is not None:
-            y0 = refuse_start_off_constraints(self.constraints, y0[0], y0[1], t0, args)
-            if solver.term_structure is RattleTerm:
-                return RattleTerm(self), canonical_start(), self.to_hamiltonian()
-            return ConstrainedLagrangianTerm(self), y0, self
-        if solver.term_structure is LagrangianTerm:
-            if self.force is not None or self.dissipation is not None:
-                raise ValueError(
-                    f"{type(solver).__name__} discretizes the conservative action only; "
-                    "this Lagrangian has a force or dissipation. Use GaussLegendre or "
-                    "an adaptive solver."
-                )
-            return LagrangianTerm(self), canonical_start(), self.to_hamiltonian()
-        if isinstance(solver, AbstractSymplecticRungeKutta):
-            hamiltonian = self.to_hamiltonian()
-            terms, _, _ = hamiltonian.integration(solver, None, t0, args)
-            return terms, canonical_start(), hamiltonian
-        if is_partitioned(solver):
-            raise ValueError(
-                f"{type(solver).__name__} is a splitting method for separable "
-                "Hamiltonians H = T(p) + V(q); integrate a Lagrangian with an implicit "
-                "symplectic method (GaussLegendre, ImplicitMidpoint) or an adaptive one."
-            )
-        return diffrax.ODETerm(LagrangianVectorField(self)), y0, self
+        ones, the constraints for RATTLE): `lagjax.mechanics.lagrangian_integration`."""
+        return lagrangian_integration(self, self.to_hamiltonian, solver, y0, t0, args)
 
     def state_velocity(self, q: Any, second: Any, t: Any, args: Any) -> Any:
         return second
