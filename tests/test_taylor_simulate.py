@@ -93,3 +93,31 @@ def test_bad_backend_and_tolerances_are_refused():
         lj.Taylor(backend="llvm")
     with pytest.raises(ValueError, match="rtol"):
         lj.Taylor(rtol=-1.0)
+
+
+def _pendulum_with(args):
+    """L of a pendulum whose args also hold a number its equations never read
+    (as a scene's args hold its initial amplitude)."""
+    return lj.Lagrangian(lambda q, v, t, a: a["m"] * (
+        0.5 * a["l"] ** 2 * v**2 + a["g"] * a["l"] * jnp.cos(q)))  # fmt: skip
+
+
+@pytest.mark.parametrize("unused", ["a_release", "z_release"])  # first or last
+def test_a_parameter_the_equations_never_read_reaches_heyoka(unused):
+    """heyoka counts the parameters its equations use (the highest index, plus
+    one) and refuses more values: one unused and last in args was heyoka's
+    ValueError for one trajectory, saved states and a batch. On the closed
+    form's small-oscillation period 2π √(l/g) they all return to the start."""
+    args = {"m": 3.0, "l": 0.5, "g": 9.81, unused: 0.7}
+    system, theta0 = _pendulum_with(args), 1e-4  # period shift θ₀²/16: 6e-10
+    period = 2 * np.pi * np.sqrt(0.5 / 9.81)
+    heyoka = lj.Taylor(backend="heyoka", rtol=1e-15, atol=1e-15)
+    one = lj.simulate(system, (theta0, 0.0), t1=period, args=args, solver=heyoka)
+    saved = lj.simulate(system, (theta0, 0.0), t1=period, args=args, solver=heyoka,
+                        ts=jnp.linspace(0.0, period, 5))  # fmt: skip
+    batch = jax.vmap(lambda a0: lj.simulate(system, (a0, 0.0), t1=period, args=args,
+                                             solver=heyoka).q[-1])  # fmt: skip
+    np.testing.assert_allclose(one.q[-1], theta0, rtol=1e-8)
+    np.testing.assert_allclose(saved.q[::2], [theta0, -theta0, theta0], rtol=1e-8)
+    np.testing.assert_allclose(batch(jnp.array([theta0, 2 * theta0])),
+                               [theta0, 2 * theta0], rtol=1e-8)  # fmt: skip

@@ -110,19 +110,12 @@ def heyoka_integrator(
             event_type(e.expression, callback=EventFilter(e.direction), fp_type=fp_type)
             for e in events
         ]
+    # No `pars=`: heyoka sizes them itself (`used_pars`).
     if width == 1:
-        ta = hy.taylor_adaptive(
-            list(system.equations),
-            np.zeros(n, fp_type),
-            pars=np.zeros(system.num_pars, fp_type),
-            **options,
-        )
+        ta = hy.taylor_adaptive(list(system.equations), np.zeros(n, fp_type), **options)
     else:
         ta = hy.taylor_adaptive_batch(
-            list(system.equations),
-            np.zeros((n, width), fp_type),
-            pars=np.zeros((system.num_pars, width), fp_type),
-            **options,
+            list(system.equations), np.zeros((n, width), fp_type), **options
         )
     _CACHES.compilations += 1
     _remember(_CACHES.integrators, key, ta)

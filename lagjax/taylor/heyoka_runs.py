@@ -143,7 +143,7 @@ class HeyokaRunner:
         ta.time = self.fp_type(t0)
         state[:] = y0
         if len(pars):
-            ta.pars[:] = pars
+            ta.pars[:] = used_pars(pars, len(ta.pars))
         outcome, _, _, steps, *_ = ta.propagate_until(
             self.fp_type(t1), max_steps=self.max_steps
         )
@@ -289,6 +289,15 @@ def _new_code(outcome: Any) -> int:
     return _CODES.get(outcome.name, OTHER)
 
 
+def used_pars(pars: np.ndarray, count: int) -> np.ndarray:
+    """The values of heyoka's `count` parameters from lagjax's `pars` (every
+    scalar of args, `heyoka.par[i]` on the first axis). heyoka counts the
+    parameters of a system as the highest index its equations use, plus one: a
+    parameter that cancels from the equations (a pendulum bob's mass) is not
+    counted when it is the last, and heyoka refuses more values than it counts."""
+    return pars[:count]
+
+
 class _Lanes:
     """heyoka's scalar and batch integrators behind one interface of (W, …)
     NumPy arrays."""
@@ -298,12 +307,13 @@ class _Lanes:
         self.max_steps = max_steps
 
     def start(self, y0s, pars, t0s) -> None:
+        used = used_pars(pars.T, len(self.ta.pars))
         if self.batch:
             self.ta.set_time(t0s)
-            self.ta.state[:], self.ta.pars[:] = y0s.T, pars.T
+            self.ta.state[:], self.ta.pars[:] = y0s.T, used
         else:
             self.ta.time = t0s[0]
-            self.ta.state[:], self.ta.pars[:] = y0s[0], pars[0]
+            self.ta.state[:], self.ta.pars[:] = y0s[0], used[:, 0]
 
     def watch_from(self, t0s) -> None:
         """The events' callbacks told the lanes' start times (a condition zero
