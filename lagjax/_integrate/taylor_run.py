@@ -37,7 +37,12 @@ from jax.flatten_util import ravel_pytree
 from lagjax._core.precision import cast_floats, working_dtype
 from lagjax._core.system import AbstractSystem
 from lagjax._integrate.checks.inputs import check_simulate_inputs
-from lagjax._integrate.checks.late_failure import raise_if_failed
+from lagjax._integrate.checks.late_failure import SimulationError, raise_if_failed
+from lagjax._integrate.checks.taylor_overflow import (
+    TRACED_MESSAGE,
+    last_finite_state,
+    overflow_message,
+)
 from lagjax._integrate.taylor_heyoka import (
     BAD_TIMES_MESSAGE,
     heyoka_member,
@@ -46,6 +51,7 @@ from lagjax._integrate.taylor_heyoka import (
 )
 from lagjax._integrate.taylor_polynomial_run import simulate_taylor_polynomials
 from lagjax.taylor.integrate import RESULTS as TAYLOR_RESULTS
+from lagjax.taylor.integrate import resolve_order
 from lagjax.taylor.solver import Taylor
 from lagjax.taylor.vmap_rule import taylor_integrate_vmappable
 from lagjax.trajectory import Trajectory
@@ -90,9 +96,31 @@ def run_taylor(
             rtol=rtol, atol=atol, max_steps=max_steps, event=event,
         )  # fmt: skip
     if throw:
-        # the tolerance the run used: the solver's own when it has one
-        trajectory = _verdict(trajectory, rtol if solver.rtol is None else solver.rtol)
+        # the tolerances the run used: the solver's own when it has them
+        rtol = rtol if solver.rtol is None else solver.rtol
+        atol = atol if solver.atol is None else solver.atol
+        order = resolve_order(rtol, atol, solver.order)
+        field, flat0, _ = flat_vector_field(system, y0)
+        _raise_if_overflowed(trajectory, field, (t0, flat0), order)
+        trajectory = _verdict(trajectory, rtol)
     return trajectory
+
+
+def _raise_if_overflowed(
+    trajectory: Trajectory, field: Any, start: tuple, order: int
+) -> None:
+    """A concrete run that went non-finite because its Taylor series overflowed,
+    raised with its own message (`checks.taylor_overflow`); the series is taken
+    at the last finite save, or at the `start` (t0, y0) when none is."""
+    if _traced(trajectory.ts, trajectory.ys):
+        return
+    finite = bool(np.all(np.asarray(trajectory.run_stats.get("finite", True))))
+    if finite and not bool(np.any(trajectory.result == diffrax.RESULTS.nonfinite)):
+        return
+    t, y = last_finite_state(trajectory) or start
+    message = overflow_message(field, t, y, trajectory.args, order)
+    if message is not None:
+        raise SimulationError(message, trajectory)
 
 
 def _traced(*trees: Any) -> bool:
@@ -110,6 +138,8 @@ def _verdict(trajectory: Trajectory, rtol: float) -> Trajectory:
             trajectory = eqx.error_if(trajectory, stats["bad_times"], BAD_TIMES_MESSAGE)
         else:
             failed = trajectory.result != diffrax.RESULTS.successful
+        if "finite" in stats:  # the JAX route: non-finite told apart
+            trajectory = eqx.error_if(trajectory, ~stats["finite"], TRACED_MESSAGE)
         return eqx.error_if(
             trajectory, failed,
             "lj.Taylor did not reach t1: raise max_steps, or see traj.result "
