@@ -55,6 +55,22 @@ def test_pendulum_acceleration_and_tension_at_a_state():
     assert relative_close(force, -tension * q / LENGTH, 1e-14)
 
 
+@pytest.mark.integration  # compile-heavy (12 s): CI runs it in its integration step
+def test_an_implicit_diffrax_solver_is_projected_too():
+    """Kvaerno5 on the Cartesian pendulum: diffrax treats the projected solver as
+    implicit (it forwards `isinstance`) and sets its root finder's tolerances,
+    which raised AttributeError before the projection exposed them."""
+    q0, qdot0 = on_circle(0.7, 0.0)
+    run = lj.simulate(PENDULUM, (q0, qdot0), t1=1.0, solver=diffrax.Kvaerno5(),
+                      rtol=1e-8, atol=1e-8)  # fmt: skip
+    assert run.stats["solver"] == "ConstraintProjection"
+    q, qdot = run.q[-1], run.qdot[-1]
+    assert abs(float(string_length(q))) < 1e-14  # projected after every step
+    assert abs(float(jnp.dot(q, qdot))) < 1e-12
+    energy0 = PENDULUM.energy(q0, qdot0)
+    assert relative_close(PENDULUM.energy(q, qdot), energy0, 1e-6)
+
+
 @pytest.mark.integration  # compile-heavy: CI runs it in its integration step
 def test_cartesian_pendulum_matches_angle_formulation_with_tension():
     cartesian = CartesianPendulum(mass=MASS, length=LENGTH, gravity=GRAVITY)

@@ -70,6 +70,13 @@ class AbstractProjectedSolver(diffrax.AbstractWrappedSolver):
     def interpolation_cls(self):  # pyright: ignore[reportIncompatibleVariableOverride]
         return self.solver.interpolation_cls
 
+    @property
+    def root_finder(self):
+        """The wrapped implicit solver's: diffrax forwards `isinstance` through a
+        wrapped solver, then reads and sets the root finder's tolerances on the
+        wrapper (an implicit solver projected raised AttributeError)."""
+        return self.solver.root_finder  # pyright: ignore[reportAttributeAccessIssue]
+
     def order(self, terms: Any) -> int | None:
         return self.solver.order(terms)
 
