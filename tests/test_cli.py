@@ -6,6 +6,7 @@ import sys
 import numpy as np
 import pytest
 
+import lagjax as lj
 from lagjax.cli import main
 
 # Whole runs of the command (scenes integrated, plotted, saved): CI's second step,
@@ -59,6 +60,18 @@ def test_run_with_solver_param_and_batch(capsys):
     out = capsys.readouterr().out
     assert code == 0
     assert "GaussLegendre" in out and "batch of 4" in out
+
+
+def test_a_batch_of_a_constrained_scene_starts_on_its_constraints(capsys, tmp_path):
+    """The perturbed copies (q and q̇ scaled) are moved back onto the string's
+    length; they were refused as starts that violate the constraints."""
+    saved = tmp_path / "run.npz"
+    code = main(["run", "cartesian-pendulum", "--t1", "0.5", "--batch", "3",
+                 "--save", str(saved)])  # fmt: skip
+    assert code == 0, capsys.readouterr()
+    q = np.load(saved)["q0"]  # the first copy, every saved state
+    length = lj.scenes.CartesianPendulum().length
+    assert np.max(np.abs(np.linalg.norm(q, axis=-1) - length)) < 1e-12
 
 
 @pytest.mark.parametrize(

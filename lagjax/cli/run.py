@@ -29,6 +29,7 @@ from jax.flatten_util import ravel_pytree
 
 from lagjax._integrate.checks.run_verdict import energy_drift
 from lagjax._integrate.simulate import simulate
+from lagjax.solvers.projection import project_onto_constraints
 
 # Saved states per run at most: every step of a scene's default run up to 2·10⁴
 # steps (each swing drawn with ≥ 20 points), every k-th beyond.
@@ -59,6 +60,18 @@ def _perturbed_batch(state, batch: int):
         return factors.reshape((batch,) + (1,) * leaf.ndim) * leaf
 
     return jax.tree_util.tree_map(spread, state)
+
+
+def _onto_constraints(scene, states):
+    """A constrained scene's perturbed copies moved back onto its constraints:
+    scaling q and q̇ stretches a pendulum's string, and every copy would be
+    refused as a start that violates them."""
+    system, args = scene.resolve(None)
+
+    def project(q, qdot):
+        return project_onto_constraints(system, q, qdot, 0.0, args)[0]
+
+    return jax.vmap(project)(*states)
 
 
 def _save_times(t1: float, dt: float | None, spacing: float, points: int) -> np.ndarray:
@@ -119,6 +132,8 @@ def run_scene(scene, t1: float, dt: float | None, solver, batch: int | None) -> 
     state = scene.initial_state()
     if batch is not None:
         state = _perturbed_batch(state, batch)
+        if scene.keeps_constraints():
+            state = _onto_constraints(scene, state)
     compiled: dict[int, Any] = {}
     done, steps, compile_time, run_time = [], 0, 0.0, 0.0
     try:
