@@ -99,25 +99,28 @@ def run_taylor(
         # the tolerances the run used: the solver's own when it has them
         rtol = rtol if solver.rtol is None else solver.rtol
         atol = atol if solver.atol is None else solver.atol
-        order = resolve_order(rtol, atol, solver.order)
-        field, flat0, _ = flat_vector_field(system, y0)
-        _raise_if_overflowed(trajectory, field, (t0, flat0), order)
+        _raise_if_overflowed(
+            trajectory, system, (t0, y0), resolve_order(rtol, atol, solver.order)
+        )
         trajectory = _verdict(trajectory, rtol)
     return trajectory
 
 
 def _raise_if_overflowed(
-    trajectory: Trajectory, field: Any, start: tuple, order: int
+    trajectory: Trajectory, system: AbstractSystem, start: tuple, order: int
 ) -> None:
     """A concrete run that went non-finite because its Taylor series overflowed,
     raised with its own message (`checks.taylor_overflow`); the series is taken
-    at the last finite save, or at the `start` (t0, y0) when none is."""
+    at the last finite save, or at the `start` (t0, y0) when none is. A run that
+    ended finite costs two lookups here, nothing more."""
     if _traced(trajectory.ts, trajectory.ys):
         return
     finite = bool(np.all(np.asarray(trajectory.run_stats.get("finite", True))))
     if finite and not bool(np.any(trajectory.result == diffrax.RESULTS.nonfinite)):
         return
-    t, y = last_finite_state(trajectory) or start
+    t0, y0 = start
+    field, flat0, _ = flat_vector_field(system, y0)
+    t, y = last_finite_state(trajectory) or (t0, flat0)
     message = overflow_message(field, t, y, trajectory.args, order)
     if message is not None:
         raise SimulationError(message, trajectory)

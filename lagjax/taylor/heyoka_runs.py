@@ -293,7 +293,7 @@ def used_pars(pars: np.ndarray, count: int) -> np.ndarray:
     """The values of heyoka's `count` parameters from lagjax's `pars` (every
     scalar of args, `heyoka.par[i]` on the first axis). heyoka counts the
     parameters of a system as the highest index its equations use, plus one: a
-    parameter that cancels from the equations (a pendulum bob's mass) is not
+    parameter the equations never read (a scene's initial amplitude) is not
     counted when it is the last, and heyoka refuses more values than it counts."""
     return pars[:count]
 
